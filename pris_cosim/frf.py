@@ -71,6 +71,26 @@ def poles_residues(ss: StateSpace, input_index: int = 0) -> tuple[PolesResidues,
     return PolesResidues(lam, residues, ss.D[:, :, input_index]), cond
 
 
+@dataclass(frozen=True)
+class Response:
+    """One named response of a driven circuit.
+
+    Parameters
+    ----------
+    name : str
+        Response name (``Zin``, ``Zlvoc``, ``Rlvhv``, ``V_mid`` ...).
+    node : str, optional
+        ``None`` for the driving-point impedance V(port)/I (Ohm); otherwise
+        the voltage ratio ``(V(node) - V(minus)) / V(port)``.
+    minus : str, optional
+        Second node of a differential ratio (ground when omitted).
+    """
+
+    name: str
+    node: str | None = None
+    minus: str | None = None
+
+
 class ResponseModel:
     """Frequency responses of one circuit driven by a current at one port.
 
@@ -83,12 +103,11 @@ class ResponseModel:
     port : str
         Driven node (current injected from ground).
     ratios : sequence of str
-        Nodes for voltage ratios ``V(node)/V(port)``.
+        Nodes for voltage ratios ``V(node)/V(port)``, named ``V_<node>``.
     shorts : sequence of str
         Nodes tied to ground for this test configuration.
-    names : mapping, optional
-        Response names to use instead of ``Zin`` / ``V_<node>``; keys
-        ``"port"`` or a ratio node.
+    responses : sequence of Response, optional
+        Explicit responses instead of ``Zin`` plus ``ratios``.
     """
 
     def __init__(
@@ -97,21 +116,40 @@ class ResponseModel:
         port: str,
         ratios: Sequence[str] = (),
         shorts: Sequence[str] = (),
-        names: Mapping[str, str] | None = None,
+        responses: Sequence[Response] | None = None,
     ):
         self.source_circuit = circuit
         self.circuit = circuit.shorted(shorts) if shorts else circuit
-        port = self.circuit.require_node(port, "port")
-        self.port = port
-        self.ratios = [self.circuit.require_node(n, "ratio node") for n in ratios]
-        for n in self.ratios:
-            if n == "0":
-                raise CircuitError("a voltage ratio to ground is identically zero; pick another node")
-        self.mna = MNA(self.circuit, current_inputs=[port])
-        names = dict(names or {})
-        self.names = [names.get("port", "Zin")] + [names.get(n, f"V_{n}") for n in self.ratios]
-        self._out_nodes = [port] + self.ratios
-        self._out_index = [self.mna.nodes.index(n) for n in self._out_nodes]
+        self.port = self.circuit.require_node(port, "port")
+        if responses is None:
+            responses = [Response("Zin")] + [Response(f"V_{self.circuit.require_node(n, 'ratio node')}", n) for n in ratios]
+        self.responses = list(responses)
+        self.names = [r.name for r in self.responses]
+        nodes = [self.port]
+        for r in self.responses:
+            for n in (r.node, r.minus):
+                if n is None:
+                    continue
+                n = self.circuit.require_node(n, f"node of response {r.name!r}")
+                if n != "0" and n not in nodes:
+                    nodes.append(n)
+        self.mna = MNA(self.circuit, current_inputs=[self.port])
+        self._out_nodes = nodes
+        self._out_index = [self.mna.nodes.index(n) for n in nodes]
+
+    def _combine(self, z: np.ndarray) -> dict[str, np.ndarray]:
+        """Responses from transfer impedances ``z`` of shape (P, nodes, F)."""
+        pos = {n: i for i, n in enumerate(self._out_nodes)}
+
+        def volt(n: str | None) -> np.ndarray | float:
+            n = None if n is None else self.circuit.require_node(n)
+            return 0.0 if n in (None, "0") else z[:, pos[n]]
+
+        out: dict[str, np.ndarray] = {}
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for r in self.responses:
+                out[r.name] = z[:, 0] if r.node is None else (volt(r.node) - volt(r.minus)) / z[:, 0]
+        return out
 
     def values(self, overrides: Mapping[str, Numeric] | None = None, strict_passive: bool = False) -> dict[str, Numeric]:
         """Resolved element values, checked; warns (or raises) when not passive."""
@@ -160,10 +198,7 @@ class ResponseModel:
             z = self._fast(values, s)
         else:
             raise CircuitError(f"unknown method {method!r} (use 'fast' or 'dense')")
-        out = {self.names[0]: z[:, 0]}
-        with np.errstate(divide="ignore", invalid="ignore"):
-            for j, name in enumerate(self.names[1:], start=1):
-                out[name] = z[:, j] / z[:, 0]
+        out = self._combine(z)
         return {k: v[0] if scalar else v for k, v in out.items()}
 
     def _fast(self, values: Mapping[str, Numeric], s: np.ndarray) -> np.ndarray:
@@ -219,4 +254,4 @@ def logspace_hz(fmin: float, fmax: float, points: int) -> np.ndarray:
     return np.logspace(np.log10(fmin), np.log10(fmax), int(points)) if points > 1 else np.array([float(fmin)])
 
 
-__all__ = ["ResponseModel", "PolesResidues", "frequency_response", "logspace_hz", "poles_residues"]
+__all__ = ["Response", "ResponseModel", "PolesResidues", "frequency_response", "logspace_hz", "poles_residues"]

@@ -80,9 +80,9 @@ def _db(psd: np.ndarray, normalize: bool) -> np.ndarray:
 def figure_2_14(
     path: str | Path,
     *,
-    order: int = 10,
+    order: int = 12,
     periods: int = 2,
-    fs: float = 1e6,
+    fs: float = 500e3,
     f_clk: float = 10e3,
     tau1: float = 100e-6,
     tau2: float = 20e-6,
@@ -102,7 +102,8 @@ def figure_2_14(
     order : int, optional
         PRBS order n.
     periods : int, optional
-        PRBS periods simulated per curve.
+        PRBS periods simulated at the reference ``f_clk``; other clock
+        frequencies use proportionally more or fewer periods.
     fs : float, Hz, optional
         Sampling frequency.
     f_clk : float, Hz, optional
@@ -133,7 +134,8 @@ def figure_2_14(
     nperseg = 2 ** int(np.log2(fs / f_clk * 128))  # ~128 bits per Welch segment
 
     def pris(fc: float, t1: float, t2: float) -> np.ndarray:
-        return pris_ideal(order, fc, fs, t1, t2, vdc, periods)[1]
+        n_periods = max(1, round(periods * fc / f_clk))  # same record length for every f_clk
+        return pris_ideal(order, fc, fs, t1, t2, vdc, n_periods)[1]
 
     fig = Figure(figsize=(11, 8), layout="tight")
     axes = fig.subplots(2, 2, sharex=True)

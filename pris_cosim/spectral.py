@@ -700,8 +700,12 @@ def log_resample(
 
     Notes
     -----
-    Complex averaging attenuates a band whose phase turns by a large angle
-    within it (e.g. a long pure delay); use ``"interp"`` or more points then.
+    Band averaging is a smoothing: a resonance narrower than a band is
+    flattened. Keep the band ratio ``(fmax/fmin) ** (1/(points-1))`` well
+    below ``1 + 1/Q`` of the sharpest resonance (for a Q = 5 peak, 100 points
+    over 3.6 decades give a 0.3 % error, 40 points 2 %). Complex averaging
+    also attenuates a band whose phase turns by a large angle within it (a
+    long pure delay); use ``"interp"`` or more points then.
     """
     fa = np.asarray(f)
     ha = np.asarray(H)
@@ -829,15 +833,13 @@ def synthesise_two_clock(
 
     f_lo_edge = ft * 10.0 ** (-bd / 2)
     f_hi_edge = ft * 10.0 ** (bd / 2)
-    what = "f_transition" if bd == 0 else "the crossfade band"
+    what = f"f_transition = {ft:g} Hz" if bd == 0 else f"the crossfade band [{f_lo_edge:g}, {f_hi_edge:g}] Hz"
     for arg, resp in (("resp_high_clk", resp_high_clk), ("resp_low_clk", resp_low_clk)):
         f = resp.frequency_hz
         pos = f[f > 0]
         if pos.size == 0 or pos[0] > f_lo_edge * (1 + _FREQ_RTOL) or f[-1] < f_hi_edge * (1 - _FREQ_RTOL):
             rng = f"[{f[0]:g}, {f[-1]:g}] Hz"
-            raise ValueError(
-                f"{arg} covers {rng}, which does not include {what} [{f_lo_edge:g}, {f_hi_edge:g}] Hz"
-            )
+            raise ValueError(f"{arg} covers {rng}, which does not include {what}")
 
     fl, fh = resp_low_clk.frequency_hz, resp_high_clk.frequency_hz
     low_sel = fl < f_lo_edge if bd > 0 else fl < ft

@@ -1,0 +1,218 @@
+"""Command line: ``pris-cosim COMMAND ...`` (also ``python -m pris_cosim``).
+
+With ``--json`` a command prints exactly one JSON object on stdout; progress,
+warnings and logs go to stderr. Bad input exits with status 2 and one line
+naming the problem.
+
+Other packages add commands through the entry-point group
+``pris_cosim.commands``: each entry is a function ``register(subparsers)``
+that adds its sub-parser and sets ``func`` on it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from collections.abc import Sequence
+from importlib.metadata import entry_points
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .circuit import Circuit
+from .errors import NonPassiveWarning
+from .frf import Response, ResponseModel, logspace_hz
+from .models import Configuration, Model, ResponseSet, get_model, model_names
+from .units import parse_value
+
+
+class UsageError(ValueError):
+    """Bad command-line input."""
+
+
+def _emit(obj: Any) -> None:
+    sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
+
+
+def _complex_json(values: np.ndarray) -> dict[str, list[float]]:
+    return {"re": [float(x) for x in np.real(values)], "im": [float(x) for x in np.imag(values)]}
+
+
+def parse_sets(items: Sequence[str]) -> dict[str, float]:
+    """``NAME=VALUE`` pairs (values with SI suffixes) from ``--set`` options."""
+    out: dict[str, float] = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise UsageError(f"--set expects NAME=VALUE (got {item!r})")
+        try:
+            out[name.strip()] = parse_value(value)
+        except ValueError:
+            raise UsageError(f"--set {name.strip()}: cannot parse value {value!r}") from None
+    return out
+
+
+def add_circuit_options(p: argparse.ArgumentParser, port_required: bool = False) -> None:
+    """``--netlist/--model``, ``--port``, ``--set`` options shared by circuit commands."""
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--netlist", metavar="FILE", help="SPICE-subset netlist")
+    src.add_argument("--model", metavar="NAME", help=f"built-in model ({', '.join(model_names())})")
+    p.add_argument("--port", metavar="NODE", required=port_required, help="driven node")
+    p.add_argument("--set", metavar="NAME=VALUE", action="append", default=[], help="override a parameter or element value")
+
+
+def load_circuit(args: argparse.Namespace) -> tuple[Circuit, Model | None]:
+    """The circuit named by ``--netlist`` or ``--model`` with ``--set`` overrides applied."""
+    from .netlist import read_netlist
+
+    if args.netlist:
+        circuit, model = read_netlist(args.netlist), None
+    else:
+        model = get_model(args.model)
+        circuit = model.circuit
+    sets = parse_sets(args.set)
+    if sets:
+        circuit = circuit.with_values(sets)
+        if model is not None:
+            model = Model(model.name, model.description, circuit, model.configurations, model.fixed)
+    return circuit, model
+
+
+# ---------------------------------------------------------------------- frf
+def _frf_parser(sub: Any) -> None:
+    p = sub.add_parser("frf", help="analytic frequency responses of a netlist or built-in model")
+    add_circuit_options(p)
+    p.add_argument("--config", action="append", default=[], metavar="NAME",
+                   help="test configuration of a model (LVOC, LVSC, HVOC, HVSC, LVHV, HVLV; repeat or comma-separate)")
+    p.add_argument("--ratio", action="append", default=[], metavar="NODE", help="add V_<node> = V(node)/V(port)")
+    p.add_argument("--short", action="append", default=[], metavar="NODE", help="tie a node to ground")
+    p.add_argument("--fmin", type=float, default=10.0, help="lowest frequency, Hz (default 10)")
+    p.add_argument("--fmax", type=float, default=1e6, help="highest frequency, Hz (default 1e6)")
+    p.add_argument("--points", type=int, default=200, help="log-spaced points (default 200)")
+    p.add_argument("--method", choices=("fast", "dense"), default="fast", help="pole-residue or dense solve")
+    p.add_argument("--plot", metavar="FILE.png", help="write magnitude/phase plots")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_frf)
+
+
+def _response_set(circuit: Circuit, model: Model | None, args: argparse.Namespace) -> ResponseSet:
+    configs = [c.strip() for item in args.config for c in item.split(",") if c.strip()]
+    if configs:
+        if model is None:
+            raise UsageError("--config needs --model (a netlist has no named test configurations; use --port)")
+        if args.port or args.ratio or args.short:
+            raise UsageError("--config cannot be combined with --port, --ratio or --short")
+        return ResponseSet(circuit, [model.configuration(c) for c in configs])
+    if args.port:
+        port = circuit.require_node(args.port, "port")
+        responses = (Response("Zin"),) + tuple(Response(f"V_{circuit.require_node(n, 'ratio node')}", n) for n in args.ratio)
+        return ResponseSet(circuit, [Configuration("custom", port, tuple(args.short), responses)])
+    if model is None:
+        if len(circuit.ports) >= 1 and not args.ratio and not args.short:
+            return ResponseSet(circuit, [Configuration("default", circuit.ports[0], (), (Response("Zin"),))])
+        raise UsageError("missing --port: name the driven node of the netlist")
+    if args.ratio or args.short:
+        raise UsageError("--ratio and --short need --port")
+    return model.response_set()
+
+
+def cmd_frf(args: argparse.Namespace) -> int:
+    circuit, model = load_circuit(args)
+    rs = _response_set(circuit, model, args)
+    f = logspace_hz(args.fmin, args.fmax, args.points)
+    values = circuit.resolve()
+    lam = circuit.smallest_inductance_eigenvalue(values)
+    responses = rs.evaluate(f, method=args.method)
+    if args.plot:
+        from .plotting import plot_responses
+
+        plot_responses(f, responses, args.plot, title=circuit.title)
+    if args.json:
+        _emit({
+            "frequency_hz": [float(x) for x in f],
+            "responses": {k: _complex_json(v) for k, v in responses.items()},
+            "passive": bool(lam > 0),
+            "smallest_inductance_eigenvalue_h": float(lam) if np.isfinite(lam) else None,
+            "method": args.method,
+        })
+    else:
+        names = list(responses)
+        print("frequency_hz," + ",".join(f"{n}_mag,{n}_phase_deg" for n in names))
+        for i, fi in enumerate(f):
+            cells = [f"{fi:.6g}"] + [f"{abs(responses[n][i]):.9g},{np.degrees(np.angle(responses[n][i])):.6g}" for n in names]
+            print(",".join(cells))
+    return 0
+
+
+# ---------------------------------------------------------------------- models
+def _models_parser(sub: Any) -> None:
+    p = sub.add_parser("models", help="list the built-in models and their parameters")
+    p.add_argument("name", nargs="?", help="show one model")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_models)
+
+
+def cmd_models(args: argparse.Namespace) -> int:
+    names = [args.name] if args.name else [n if n != "cascade-N" else "cascade-4" for n in model_names()]
+    out = []
+    for name in names:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NonPassiveWarning)
+            m = get_model(name)
+        values = m.circuit.resolve()
+        out.append({
+            "name": m.name,
+            "description": m.description,
+            "configurations": {k: {"port": c.port, "shorts": list(c.shorts), "responses": [r.name for r in c.responses]}
+                               for k, c in m.configurations.items()},
+            "parameters": m.circuit.summary(),
+            "fixed": list(m.fixed),
+            "passive": bool(m.circuit.smallest_inductance_eigenvalue(values) > 0),
+        })
+    if args.json:
+        _emit({"models": out})
+        return 0
+    for m in out:
+        print(f"{m['name']}: {m['description']}")
+        print(f"  configurations: {', '.join(m['configurations'])}; passive: {m['passive']}")
+        if args.name:
+            for row in m["parameters"]:
+                expr = f"  = {row['expression']}" if row["expression"] else ""
+                print(f"  {row['name']:>8} {row['value']:12.6g} {row['unit']}{expr}")
+    return 0
+
+
+# ---------------------------------------------------------------------- main
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="pris-cosim", description="PRIS perturbation, circuits, FMUs and estimation")
+    parser.add_argument("--version", action="version", version=f"pris-cosim {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _frf_parser(sub)
+    _models_parser(sub)
+    for ep in entry_points(group="pris_cosim.commands"):
+        ep.load()(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``pris-cosim`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    warnings.simplefilter("default", NonPassiveWarning)
+    warnings.showwarning = _show_warning
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, OSError) as exc:
+        print(f"pris-cosim {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _show_warning(message: Any, category: Any, filename: str, lineno: int, file: Any = None, line: Any = None) -> None:
+    print(f"pris-cosim: warning: {message}", file=sys.stderr)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
