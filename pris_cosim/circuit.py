@@ -43,7 +43,10 @@ def _as_value(value: Any, what: str) -> Value:
     if isinstance(value, str):
         from .units import is_number, parse_value
 
-        return parse_value(value) if is_number(value) else Expression(value)
+        try:
+            return parse_value(value) if is_number(value) else Expression(value)
+        except ValueError as exc:
+            raise CircuitError(f"{what}: {exc}") from None
     try:
         return float(value)
     except (TypeError, ValueError):

@@ -111,11 +111,12 @@ def parse_netlist(text: str, source: str = "<netlist>") -> Circuit:
         except CircuitError:
             raise NetlistError(f"{source}: unit given for unknown parameter {name!r}") from None
         circuit.parameters[circuit.parameters.index(p)] = type(p)(p.name, p.value, unit, p.description)
-    for node in circuit.ports + circuit.probes:
-        try:
-            circuit.require_node(node)
-        except CircuitError as exc:
-            raise NetlistError(f"{source}: {exc}") from None
+    for role, nodes in (("port", circuit.ports), ("probe", circuit.probes)):
+        for node in nodes:
+            try:
+                circuit.require_node(node, role)
+            except CircuitError as exc:
+                raise NetlistError(f"{source}: {exc}") from None
     return circuit
 
 
@@ -144,10 +145,7 @@ def _element(circuit: Circuit, line: str, where: str) -> None:
     extra = [t for t in tokens[4:] if not re.match(r"(?i)^(ic|m|tc1|tc2)=", t)]
     if extra:
         raise NetlistError(f"{where}: element {tokens[0]!r}: unexpected {' '.join(extra)!r}")
-    try:
-        circuit.add(tokens[0], tokens[1], tokens[2], tokens[3])
-    except ValueError as exc:
-        raise NetlistError(f"{where}: element {tokens[0]!r}: {exc}") from None
+    circuit.add(tokens[0], tokens[1], tokens[2], tokens[3])
 
 
 def _source_dc(words: list[str]) -> float:

@@ -140,8 +140,9 @@ def figure_2_14(
     fig = Figure(figsize=(11, 8), layout="tight")
     axes = fig.subplots(2, 2, sharex=True)
     ax_a, ax_b, ax_c, ax_d = axes.ravel()
+    prbs = hbridge_waveform(order, f_clk, fs, vdc, periods)[1]
     plot_psd_comparison(
-        {"PRIS": pris(f_clk, tau1, tau2), "PRBS": hbridge_waveform(order, f_clk, fs, vdc, periods)[1]},
+        {"PRIS": pris(f_clk, tau1, tau2), "PRBS": prbs},
         fs,
         nperseg=nperseg,
         overlays={"PRBS theory": lambda f: prbs_psd_theory(f, f_clk, vdc)},

@@ -143,7 +143,7 @@ def _seed_bits(order: int, seed: int | Sequence[int] | None) -> np.ndarray:
 
 
 def _run_recurrence(head: np.ndarray, taps: Sequence[int], total: int) -> np.ndarray:
-    """Extend ``head`` to ``total`` bits with ``s[j] = XOR_t s[j - t]``.
+    """Extend ``head`` to ``total >= len(head)`` bits with ``s[j] = XOR_t s[j - t]``.
 
     Over GF(2) squaring the feedback polynomial spreads its lags:
     ``p(x)**2 == p(x**2)``, so the same bits also obey
@@ -152,7 +152,7 @@ def _run_recurrence(head: np.ndarray, taps: Sequence[int], total: int) -> np.nda
     ``min(taps) * step`` bits be computed at once with array slices.
     """
     n = len(head)
-    out = np.empty(max(total, n), dtype=np.uint8)
+    out = np.empty(total, dtype=np.uint8)
     out[:n] = head
     known, step = n, 1
     while known < total:
@@ -166,7 +166,7 @@ def _run_recurrence(head: np.ndarray, taps: Sequence[int], total: int) -> np.nda
                 acc ^= out[j - lag : end - lag]
             out[j:end] = acc
         known, step = stop, 2 * step
-    return out[:total]
+    return out
 
 
 class LFSR:
@@ -261,7 +261,7 @@ def bipolar(bits: np.ndarray, vdc: float) -> np.ndarray:
 
 
 def _clock_ratio(f_clk: float, fs: float) -> tuple[int, int]:
-    """Integers (p, q) with f_clk / fs == p / q (exact if q <= 2**31 suffices)."""
+    """Integers (p, q) with f_clk / fs == p / q, q <= 2**31 (nearest such fraction)."""
     ratio = Fraction(_positive("f_clk", f_clk)) / Fraction(_positive("fs", fs))
     ratio = ratio.limit_denominator(_MAX_DENOMINATOR)
     return ratio.numerator, ratio.denominator
@@ -472,8 +472,10 @@ def time_factor(u: np.ndarray, fs: float, fmin: float, fmax: float) -> float:
     Returns
     -------
     float
-        Time factor; 1 for a sine whose frequency lies on a DFT bin when the
-        band contains only that bin, larger for less efficient excitations.
+        Time factor; larger for less efficient excitations.  A sine whose
+        frequency lies on a DFT bin, analysed over a band containing only that
+        bin, gives 1 (exactly, if the samples include its peak; otherwise
+        slightly less, since the sampled crest factor is below sqrt(2)).
 
     Notes
     -----
@@ -516,7 +518,7 @@ def damping_ratio(R: float, L: float, C: float) -> float:
         < 1 underdamped (complex poles), 1 critical, > 1 overdamped.
     """
     R, L, C = _positive("R", R), _positive("L", L), _positive("C", C)
-    return R / 2 * np.sqrt(C / L)
+    return float(R / 2 * np.sqrt(C / L))
 
 
 def rlc_time_constants(R: float, L: float, C: float) -> tuple[float, float]:
@@ -659,7 +661,9 @@ def prbs_psd_theory(f: np.ndarray, f_clk: float, vdc: float) -> np.ndarray:
     return 2 * vdc**2 / f_clk * np.sinc(np.asarray(f, dtype=float) / f_clk) ** 2
 
 
-def welch_psd(x: np.ndarray, fs: float, nperseg: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def welch_psd(
+    x: np.ndarray, fs: float, nperseg: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """One-sided Welch PSD with a Hann window and 62.5 % overlap (thesis 4.1.2).
 
     Parameters

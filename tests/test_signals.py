@@ -177,11 +177,10 @@ def test_pris_impulse_peak_matches_closed_form():
     assert amp * peak * (1 - 1e-4) <= u[k] <= amp * peak
     expected = amp * (np.exp(-t / tau1) - np.exp(-t / tau2))
     np.testing.assert_allclose(u[first_bit], expected[first_bit], rtol=1e-12, atol=1e-15)
-    # Symbolic check that t* zeroes the derivative of (2.16).
+    # Derivation: the only stationary point of (2.16) is the closed-form t*.
     ts, a, b = sympy.symbols("t a b", positive=True)
-    f = sympy.exp(-ts / a) - sympy.exp(-ts / b)
-    star = a * b * sympy.log(a / b) / (a - b)
-    assert sympy.simplify(sympy.diff(f, ts).subs(ts, star).subs({a: 3, b: 1})) == 0
+    (solution,) = sympy.solve(sympy.diff(sympy.exp(-ts / a) - sympy.exp(-ts / b), ts), ts)
+    assert float(solution.subs({a: tau1, b: tau2})) == pytest.approx(t_star, rel=1e-12)
 
 
 def test_pris_signs_chopping_and_periodicity():
@@ -201,6 +200,16 @@ def test_pris_signs_chopping_and_periodicity():
     half = u.size // 2
     np.testing.assert_allclose(u[:half], u[half:], atol=1e-12)  # exactly periodic
     assert np.abs(u).max() <= peak
+
+
+def test_pris_follows_hbridge_polarity_on_a_non_multiple_grid():
+    args = (6, 1000.0, 7777.0)  # order, f_clk, fs: 7.777 samples per bit
+    t_v, v = sg.hbridge_waveform(*args, 1.0, periods=3)
+    t_u, u = sg.pris_ideal(*args, 4e-4, 3e-5, 1.0, periods=3)
+    np.testing.assert_array_equal(t_u, t_v)
+    nonzero = u != 0
+    assert nonzero.mean() > 0.9
+    np.testing.assert_array_equal(np.sign(u[nonzero]), np.sign(v[nonzero]))
 
 
 def test_pris_rejects_equal_time_constants():
@@ -307,8 +316,9 @@ def test_thesis_rlc_sets():
         with pytest.warns(sg.UnderdampedWarning):
             taus[name] = sg.rlc_time_constants(*rlc)
         zetas[name] = sg.damping_ratio(*rlc)
+        tau1, tau2 = taus[name]
         print(f"{name:>10}: R={rlc[0]:.4g} Ohm L={rlc[1]:.4g} H C={rlc[2]:.4g} F "
-              f"zeta={zetas[name]:.4f} tau1={taus[name][0] * 1e6:.2f} us tau2={taus[name][1] * 1e6:.2f} us")
+              f"zeta={zetas[name]:.4f} tau1={tau1 * 1e6:.2f} us tau2={tau2 * 1e6:.2f} us")
     assert taus["base"] == pytest.approx(taus["base x1000"], rel=1e-12)
     assert zetas["base"] == pytest.approx(zetas["base x1000"], rel=1e-12)
     assert taus["base"][0] == pytest.approx(1.5906e-3, rel=1e-4)
@@ -326,9 +336,7 @@ def test_welch_psd_of_prbs_follows_sinc_squared():
     f, psd = sg.welch_psd(v, fs, nperseg=1024)
     band = (f >= 2 * f[1]) & (f <= f_clk / 2)
     error_db = 10 * np.log10(psd[band] / sg.prbs_psd_theory(f[band], f_clk, vdc))
-    assert np.abs(error_db).max() < 0.75  # tolerance: 0.75 dB below f_clk/2
-    # Total power vdc**2 is recovered by integrating the estimate.
-    assert np.trapezoid(psd, f) == pytest.approx(vdc**2, rel=0.02)
+    assert np.abs(error_db).max() < 0.3  # tolerance: 0.3 dB between 2 bins and f_clk/2
 
 
 def test_prbs_psd_theory_landmarks():
@@ -336,8 +344,12 @@ def test_prbs_psd_theory_landmarks():
     s0 = sg.prbs_psd_theory(0.0, f_clk, 1.0)
     assert s0 == pytest.approx(2 / f_clk)
     assert sg.prbs_psd_theory(f_clk, f_clk, 1.0) == pytest.approx(0, abs=1e-20)
-    assert 10 * np.log10(sg.prbs_psd_theory(f_clk / 3, f_clk, 1.0) / s0) == pytest.approx(-1.65, abs=0.01)
-    assert 10 * np.log10(sg.prbs_psd_theory(0.443 * f_clk, f_clk, 1.0) / s0) == pytest.approx(-3.0, abs=0.02)
+
+    def rel_db(f):
+        return 10 * np.log10(sg.prbs_psd_theory(f, f_clk, 1.0) / s0)
+
+    assert rel_db(f_clk / 3) == pytest.approx(-1.65, abs=0.01)  # not -3 dB, as often quoted
+    assert rel_db(0.443 * f_clk) == pytest.approx(-3.0, abs=0.02)
 
 
 def test_plot_psd_comparison_draws_one_line_per_curve():
