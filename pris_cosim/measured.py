@@ -674,7 +674,7 @@ def _is_marker(line: str) -> bool:
     return line.lstrip().lower().startswith(_SEGMENT_MARK)
 
 
-def _split_segmented(path: PathLike, lines: list[str], need_header: bool = True) -> _SegmentedFile:
+def _split_segmented(path: PathLike, lines: list[str]) -> _SegmentedFile:
     """Split a CSV with optional ``<segment>`` markers into its parts."""
     file_comments: list[str] = []
     header_line = 0
@@ -691,7 +691,7 @@ def _split_segmented(path: PathLike, lines: list[str], need_header: bool = True)
             (current.comments if current is not None else file_comments).append(text)
             continue
         if _is_marker(s):
-            if not header_line and need_header:
+            if not header_line:
                 raise MeasuredDataError(
                     path, "'<segment>' line before the header line", ln
                 )
@@ -734,15 +734,15 @@ def _aliases(comment: str) -> tuple[str, ...]:
     return tuple(words)
 
 
-_SI = {"f": 1e-15, "p": 1e-12, "n": 1e-9, "u": 1e-6, "µ": 1e-6, "m": 1e-3,
+_SI = {"f": 1e-15, "p": 1e-12, "n": 1e-9, "u": 1e-6, "µ": 1e-6, "μ": 1e-6, "m": 1e-3,
        "k": 1e3, "meg": 1e6, "g": 1e9, "t": 1e12}
 
 
 def _label_value(text: str) -> float | None:
     """Numeric value of a label such as ``49.5``, ``49.5R``, ``5 mOhm``, ``5e-3``."""
     s = "".join(text.split()).lower()
-    s = re.sub(r"(ohms?|Ω|r)$", "", s)
-    m = re.fullmatch(r"([+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:e[+-]?\d+)?)(meg|[fpnuµmkgt])?", s)
+    s = re.sub(r"(ohms?|[ωΩ]|r)$", "", s)
+    m = re.fullmatch(r"([+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:e[+-]?\d+)?)(meg|[fpnuµμmkgt])?", s)
     if not m:
         return None
     v = float(m.group(1))
@@ -809,7 +809,9 @@ def _header_cells(header: str) -> list[str]:
     return [c.strip() for c in _strip_comment(header).split(",")]
 
 
-def _interfaces_columns(path: PathLike, line: int, cells: list[str]):
+def _interfaces_columns(
+    path: PathLike, line: int, cells: list[str]
+) -> list[tuple[str, str, int, int]]:
     """Map an interfaces-format header to ``[(name, form, col_a, col_b)]``."""
     if cells[0].lower() != "frequency_hz":
         raise MeasuredDataError(
@@ -885,7 +887,9 @@ def _split_unit(cell: str) -> tuple[str, str]:
     return cell.strip().lower(), ""
 
 
-def _instrument_columns(path: PathLike, line: int, cells: list[str]):
+def _instrument_columns(
+    path: PathLike, line: int, cells: list[str]
+) -> tuple[float, str, float]:
     """Interpret ``FREQUENCY [Hz],MAG [O],PHASE [deg]`` style headers.
 
     Returns ``(freq_scale, form, phase_scale_to_deg)``.
@@ -1762,7 +1766,7 @@ _MAT_META = ("comments", "segment", "source")
 _MAT_NAME_RE = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,62}")
 
 
-def _mat_strings(value) -> list[str]:
+def _mat_strings(value: object) -> list[str]:
     """Turn a loaded MATLAB char array / cell array into a list of str."""
     a = np.asarray(value)
     if a.dtype.kind == "U":

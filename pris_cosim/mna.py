@@ -299,11 +299,14 @@ class MNA:
         dyn = np.zeros((P, n, n))
         dyn[:, :N, :N] = Cn
         dyn[:, N : N + m, N : N + m] = L
-        for f0 in range(0, s.size, chunk):
-            sc = s[f0 : f0 + chunk]
-            K = static[:, None] + sc[None, :, None, None] * dyn[:, None]
-            x = np.linalg.solve(K, np.broadcast_to(rhs, K.shape[:2] + rhs.shape))
-            out[:, :, :, f0 : f0 + chunk] = np.moveaxis(x[:, :, list(outputs), :], 1, -1)
+        p_chunk = max(1, 4096 // max(1, min(chunk, s.size)))
+        for p0 in range(0, P, p_chunk):
+            st, dy = static[p0 : p0 + p_chunk, None], dyn[p0 : p0 + p_chunk, None]
+            for f0 in range(0, s.size, chunk):
+                sc = s[f0 : f0 + chunk]
+                K = st + sc[None, :, None, None] * dy
+                x = np.linalg.solve(K, np.broadcast_to(rhs, K.shape[:2] + rhs.shape))
+                out[p0 : p0 + p_chunk, :, :, f0 : f0 + chunk] = np.moveaxis(x[:, :, list(outputs), :], 1, -1)
         return out
 
 
