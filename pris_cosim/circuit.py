@@ -439,6 +439,15 @@ class Circuit:
         return replace(self, elements=list(self.elements), parameters=list(self.parameters),
                        ports=list(self.ports), probes=list(self.probes), comments=list(self.comments))
 
+    def free_names(self) -> list[str]:
+        """Names that can be set independently: numeric parameters and numeric R/L/C/K elements.
+
+        Tied parameters and elements given by expressions follow from these.
+        """
+        names = [p.name for p in self.parameters if not p.is_tied]
+        names += [e.name for e in self.elements if e.kind in "RLCK" and not isinstance(e.value, Expression)]
+        return names
+
     def summary(self) -> list[dict[str, Any]]:
         """Rows describing every parameter and element value (for listings)."""
         rows: list[dict[str, Any]] = []

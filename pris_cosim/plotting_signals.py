@@ -11,7 +11,8 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from pris_cosim.signals import hbridge_waveform, pris_ideal, prbs_psd_theory, welch_psd
+from pris_cosim.signals import hbridge_waveform, pris_ideal, prbs_psd_theory
+from pris_cosim.spectral import welch_psd
 
 __all__ = ["plot_psd_comparison", "figure_2_14"]
 

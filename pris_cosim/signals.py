@@ -20,7 +20,6 @@ from fractions import Fraction
 from typing import Sequence
 
 import numpy as np
-from scipy import signal as _sps
 
 __all__ = [
     "MAX_LENGTH_TAPS",
@@ -40,7 +39,6 @@ __all__ = [
     "rlc_from_time_constants",
     "scale_rlc",
     "prbs_psd_theory",
-    "welch_psd",
 ]
 
 #: Feedback taps of maximal-length Fibonacci LFSRs, keyed by order n.  Tap t
@@ -88,7 +86,6 @@ MAX_LENGTH_TAPS: dict[int, tuple[int, ...]] = {
 #: this set; 253 mH is most likely a misprint of 2.53 mH.
 THESIS_BASE_RLC: tuple[float, float, float] = (31.8, 0.253, 10e-6)
 
-_WELCH_OVERLAP = 0.625
 _MAX_DENOMINATOR = 2**31
 
 
@@ -659,31 +656,3 @@ def prbs_psd_theory(f: np.ndarray, f_clk: float, vdc: float) -> np.ndarray:
     """
     f_clk, vdc = _positive("f_clk", f_clk), _positive("vdc", vdc)
     return 2 * vdc**2 / f_clk * np.sinc(np.asarray(f, dtype=float) / f_clk) ** 2
-
-
-def welch_psd(
-    x: np.ndarray, fs: float, nperseg: int | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """One-sided Welch PSD with a Hann window and 62.5 % overlap (thesis 4.1.2).
-
-    Parameters
-    ----------
-    x : array_like
-        Signal samples (unit X).
-    fs : float, Hz
-        Sampling frequency.
-    nperseg : int, optional
-        Segment length in samples; default half the record, as in the thesis.
-
-    Returns
-    -------
-    f : numpy.ndarray, Hz
-    psd : numpy.ndarray, X**2/Hz
-    """
-    x = np.asarray(x, dtype=float)
-    fs = _positive("fs", fs)
-    nperseg = _count("nperseg", x.size // 2 if nperseg is None else nperseg, 2)
-    if nperseg > x.size:
-        raise ValueError(f"nperseg must not exceed len(x) = {x.size}, got {nperseg}")
-    noverlap = int(round(_WELCH_OVERLAP * nperseg))
-    return _sps.welch(x, fs, window="hann", nperseg=nperseg, noverlap=noverlap)
