@@ -1,0 +1,149 @@
+"""Resonances of measured or computed responses, and the model order they suggest.
+
+A parallel resonance is a local maximum of ``|Z|`` (the impedance phase falls
+through zero); a series resonance is a local minimum. The number of parallel
+resonances of a winding's driving-point impedance is the usual first guess of
+the number of sections of its cascade model (thesis 2.1.3, 5.1.3).
+
+Detection works on ``20 log10 |H|`` against log frequency with a prominence
+threshold, after a light smoothing whose window adapts to the point density,
+so measurement noise does not count as resonances.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.signal import find_peaks, savgol_filter
+
+
+@dataclass(frozen=True)
+class Resonance:
+    """One resonance.
+
+    Attributes
+    ----------
+    frequency_hz : float, Hz
+    kind : str
+        ``"parallel"`` (magnitude peak) or ``"series"`` (magnitude dip).
+    magnitude : float
+        ``|H|`` at the resonance (Ohm for impedances).
+    prominence_db : float, dB
+        Height above (or depth below) the surrounding response.
+    """
+
+    frequency_hz: float
+    kind: str
+    magnitude: float
+    prominence_db: float
+
+    def as_dict(self) -> dict[str, float | str]:
+        return asdict(self)
+
+
+def _smoothed_db(frequency_hz: np.ndarray, values: np.ndarray, smooth_decades: float) -> np.ndarray:
+    db = 20 * np.log10(np.abs(values))
+    if smooth_decades <= 0 or db.size < 7:
+        return db
+    per_decade = (db.size - 1) / max(np.log10(frequency_hz[-1] / frequency_hz[0]), 1e-12)
+    window = int(round(smooth_decades * per_decade)) | 1
+    if window < 5:
+        return db
+    return savgol_filter(db, min(window, (db.size - 2) | 1), polyorder=3)
+
+
+def find_resonances(
+    frequency_hz: np.ndarray,
+    values: np.ndarray,
+    min_prominence_db: float = 1.0,
+    smooth_decades: float = 0.02,
+    fmin: float | None = None,
+    fmax: float | None = None,
+) -> list[Resonance]:
+    """Parallel and series resonances of a complex response, in frequency order.
+
+    Parameters
+    ----------
+    frequency_hz : array_like, Hz
+        Increasing frequencies (log-spaced is best).
+    values : array_like, complex
+        The response (an impedance for the parallel/series naming to hold).
+    min_prominence_db : float, dB
+        Smallest peak or dip that counts.
+    smooth_decades : float
+        Savitzky-Golay window width in decades (0 disables smoothing).
+    fmin, fmax : float, Hz, optional
+        Band to search.
+
+    Returns
+    -------
+    list of Resonance
+    """
+    f = np.asarray(frequency_hz, float)
+    h = np.asarray(values)
+    if f.ndim != 1 or f.shape != h.shape or f.size < 3:
+        raise ValueError("frequency_hz and values must be 1-D arrays of the same length (at least 3 points)")
+    band = np.ones(f.size, bool)
+    if fmin is not None:
+        band &= f >= fmin
+    if fmax is not None:
+        band &= f <= fmax
+    f, h = f[band], h[band]
+    if f.size < 3:
+        return []
+    db = _smoothed_db(f, h, smooth_decades)
+    out: list[Resonance] = []
+    for kind, sign in (("parallel", 1.0), ("series", -1.0)):
+        idx, props = find_peaks(sign * db, prominence=min_prominence_db)
+        out += [Resonance(float(f[i]), kind, float(np.abs(h[i])), float(p)) for i, p in zip(idx, props["prominences"])]
+    return sorted(out, key=lambda r: r.frequency_hz)
+
+
+def count_parallel(resonances: list[Resonance]) -> int:
+    """Number of parallel resonances in a list."""
+    return sum(r.kind == "parallel" for r in resonances)
+
+
+def suggest_sections(
+    responses: Mapping[str, tuple[np.ndarray, np.ndarray]],
+    impedances: tuple[str, ...] = ("Zin", "Zhvsc", "Zhvoc"),
+    even: bool = False,
+    **kwargs: float,
+) -> dict[str, object]:
+    """Suggest the number of winding sections from the parallel resonances.
+
+    Parameters
+    ----------
+    responses : mapping
+        Response name to ``(frequency_hz, complex values)``.
+    impedances : tuple of str
+        Driving-point impedances to count on, in order of preference; the
+        largest count among those present is used (thesis 5.1.3 counts the
+        HV short-circuit impedance).
+    even : bool
+        Round up to an even number (two-winding models keep the
+        inter-winding capacitance at the HV midpoint).
+    **kwargs
+        Passed to :func:`find_resonances`.
+
+    Returns
+    -------
+    dict
+        ``sections``, ``counted_on`` and ``resonances`` per response (as dicts).
+    """
+    found = {name: find_resonances(*responses[name], **kwargs) for name in responses}
+    counts = {name: count_parallel(found[name]) for name in impedances if name in found}
+    if not counts:
+        raise ValueError(f"none of the impedances {', '.join(impedances)} is among the responses ({', '.join(responses)})")
+    best = max(counts, key=lambda n: counts[n])
+    n = max(1, counts[best])
+    if even and n % 2:
+        n += 1
+    return {
+        "sections": n,
+        "counted_on": best,
+        "parallel_counts": counts,
+        "resonances": {name: [r.as_dict() for r in rs] for name, rs in found.items()},
+    }
