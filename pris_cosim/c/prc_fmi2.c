@@ -1,0 +1,708 @@
+/* FMI 2.0 interface (Co-Simulation and Model Exchange) of a generated network FMU.
+ *
+ * The network is linear time-invariant; its input is piecewise constant: the
+ * H-bridge voltage +-V_DC switches at the PRBS clock instants j / f_clk, and
+ * the FMU inputs are held constant over a communication step (co-simulation)
+ * or given continuously (model exchange).
+ *
+ * Co-simulation: doStep advances the state exactly with the zero-order-hold
+ * discretisation x+ = Phi(h) x + Gamma(h) u, Phi and Gamma taken from
+ * expm([[A, B], [0, 0]] h) and cached per step length h. A switching instant
+ * inside a step splits it there.
+ * Model exchange: x' = A x + B u; switching instants are time events
+ * (fmi2EventInfo.nextEventTime).
+ */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+#include "prc_expm.h"
+#include "prc_linalg.h"
+#include "prc_model.h"
+#include "prc_network.h"
+
+#define PRC_CACHE 8
+#define MSG_LEN 512
+
+typedef enum { ST_INSTANTIATED, ST_INIT, ST_RUN, ST_TERMINATED, ST_ERROR } prc_state;
+
+typedef struct {
+    double h;      /* step length, s (0 = empty slot) */
+    double *Phi;   /* nx x nx */
+    double *Gam;   /* nx x nu */
+} prc_disc;
+
+typedef struct {
+    const prc_model *m;
+    fmi2CallbackFunctions cb;
+    char *name;
+    fmi2Type type;
+    int logging;
+    prc_state state;
+    double *r;         /* Real variables by vr (states included) */
+    int *iv;           /* Integer variables by vr */
+    int dirty;         /* parameters changed since the last build */
+    double time;
+    prc_net net;
+    double *u, *dx, *scratch, *aug, *augexp, *work;
+    int *ipiv;
+    prc_disc cache[PRC_CACHE];
+    int cache_next;
+    /* PRBS generator */
+    unsigned long long reg, mask, taps;
+    int order;
+    long long bit;     /* index of the bit active now */
+} prc_inst;
+
+/* ------------------------------------------------------------------ helpers */
+
+static void logmsg(prc_inst *c, fmi2Status status, const char *category, const char *fmt, ...) {
+    char buf[MSG_LEN];
+    va_list ap;
+    if (!c->cb.logger) return;
+    if (status == fmi2OK && !c->logging) return;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    c->cb.logger(c->cb.componentEnvironment, c->name, status, category, "%s", buf);
+}
+
+static fmi2Status fail(prc_inst *c, const char *fn, const char *fmt, ...) {
+    char buf[MSG_LEN];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    logmsg(c, fmi2Error, "logStatusError", "%s: %s", fn, buf);
+    return fmi2Error;
+}
+
+static void *alloc(prc_inst *c, size_t n, size_t size) {
+    return c->cb.allocateMemory(n ? n : 1, size);
+}
+
+static int nx_of(const prc_model *m) { return m->n_q1 + m->n_l; }
+static int nu_of(const prc_model *m) { return m->n_ui + m->n_uv; }
+
+static int has_bridge(const prc_model *m) { return m->bridge_input >= 0; }
+
+static double fclk(prc_inst *c) { return c->r[c->m->vr_fclk]; }
+
+static double next_switch(prc_inst *c) { return (double)(c->bit + 1) / fclk(c); }
+
+static int current_bit(prc_inst *c) { return (int)((c->reg >> (c->order - 1)) & 1ULL); }
+
+static void advance_bit(prc_inst *c) {
+    unsigned long long fb = c->reg & c->taps;
+    int parity = 0;
+    while (fb) {
+        parity ^= 1;
+        fb &= fb - 1;
+    }
+    c->reg = ((c->reg << 1) | (unsigned long long)parity) & c->mask;
+    c->bit++;
+}
+
+static double bridge_level(prc_inst *c) {
+    double vdc = c->r[c->m->vr_vdc];
+    return current_bit(c) ? vdc : -vdc;
+}
+
+/* u = [current inputs, voltage inputs] at the present time */
+static void load_inputs(prc_inst *c) {
+    const prc_model *m = c->m;
+    int j;
+    for (j = 0; j < nu_of(m); j++)
+        c->u[j] = j == m->bridge_input ? bridge_level(c) : c->r[m->input_vr[j]];
+}
+
+static void reset_prbs(prc_inst *c) {
+    const prc_model *m = c->m;
+    if (!has_bridge(m)) return;
+    c->order = c->iv[m->ivr_order];
+    c->mask = c->order >= 64 ? ~0ULL : ((1ULL << c->order) - 1ULL);
+    c->taps = m->prbs_taps[c->order];
+    c->reg = c->iv[m->ivr_seed] == 0 ? c->mask : (unsigned long long)(unsigned int)c->iv[m->ivr_seed];
+    c->bit = 0;
+}
+
+static int check_source(prc_inst *c, char *msg, size_t len) {
+    const prc_model *m = c->m;
+    int order, seed;
+    double f, v;
+    if (!has_bridge(m)) return 0;
+    order = c->iv[m->ivr_order];
+    seed = c->iv[m->ivr_seed];
+    f = c->r[m->vr_fclk];
+    v = c->r[m->vr_vdc];
+    if (order < 2 || order > 32) {
+        snprintf(msg, len, "parameter 'prbs_order' must be between 2 and 32 (got %d)", order);
+        return -1;
+    }
+    if (seed < 0 || (order < 31 && seed >= (1 << order))) {
+        snprintf(msg, len, "parameter 'prbs_seed' must be 0 (all ones) or in 1..2^%d-1 (got %d)", order, seed);
+        return -1;
+    }
+    if (!isfinite(f) || !(f > 0.0)) {
+        snprintf(msg, len, "parameter 'fclk' must be positive (got %g Hz)", f);
+        return -1;
+    }
+    if (!isfinite(v) || !(v > 0.0)) {
+        snprintf(msg, len, "parameter 'vdc' must be positive (got %g V)", v);
+        return -1;
+    }
+    return 0;
+}
+
+/* Evaluate ties, check values and rebuild the continuous model when parameters changed. */
+static fmi2Status ensure_built(prc_inst *c, const char *fn) {
+    char msg[MSG_LEN];
+    int i;
+    if (c->state == ST_ERROR) return fail(c, fn, "the instance is in an error state; call fmi2Reset");
+    if (!c->dirty) return fmi2OK;
+    c->m->compute(c->r);
+    if (check_source(c, msg, sizeof msg) ||
+        prc_network_build(c->m, c->r, &c->net, c->scratch, msg, sizeof msg)) {
+        c->state = ST_ERROR;
+        return fail(c, fn, "invalid parameters: %s", msg);
+    }
+    for (i = 0; i < PRC_CACHE; i++) c->cache[i].h = 0.0;
+    c->dirty = 0;
+    logmsg(c, fmi2OK, "logAll", "%s: model assembled (%d states)", fn, c->net.nx);
+    return fmi2OK;
+}
+
+/* Phi(h), Gamma(h) from expm([[A h, B h], [0, 0]]), cached by h. */
+static prc_disc *discretise(prc_inst *c, double h) {
+    const int nx = c->net.nx, nu = c->net.nu, n = nx + nu;
+    prc_disc *d;
+    int i, j;
+    for (i = 0; i < PRC_CACHE; i++)
+        if (c->cache[i].h > 0.0 && fabs(c->cache[i].h - h) <= 1e-12 * h) return &c->cache[i];
+    d = &c->cache[c->cache_next];
+    c->cache_next = (c->cache_next + 1) % PRC_CACHE;
+    memset(c->aug, 0, sizeof(double) * (size_t)n * n);
+    for (i = 0; i < nx; i++) {
+        for (j = 0; j < nx; j++) c->aug[(size_t)i * n + j] = c->net.A[(size_t)i * nx + j] * h;
+        for (j = 0; j < nu; j++) c->aug[(size_t)i * n + nx + j] = c->net.B[(size_t)i * nu + j] * h;
+    }
+    if (prc_expm(n, c->aug, c->augexp, c->work, c->ipiv)) return NULL;
+    for (i = 0; i < nx; i++) {
+        for (j = 0; j < nx; j++) d->Phi[(size_t)i * nx + j] = c->augexp[(size_t)i * n + j];
+        for (j = 0; j < nu; j++) d->Gam[(size_t)i * nu + j] = c->augexp[(size_t)i * n + nx + j];
+    }
+    d->h = h;
+    return d;
+}
+
+static double *states(prc_inst *c) { return c->r + c->m->vr_state0; }
+
+static int zoh_step(prc_inst *c, double h) {
+    const int nx = c->net.nx, nu = c->net.nu;
+    prc_disc *d = discretise(c, h);
+    double *x = states(c);
+    int i, j;
+    if (!d) return -1;
+    load_inputs(c);
+    for (i = 0; i < nx; i++) {
+        double s = 0.0;
+        for (j = 0; j < nx; j++) s += d->Phi[(size_t)i * nx + j] * x[j];
+        for (j = 0; j < nu; j++) s += d->Gam[(size_t)i * nu + j] * c->u[j];
+        c->dx[i] = s;
+    }
+    memcpy(x, c->dx, sizeof(double) * (size_t)nx);
+    return 0;
+}
+
+static void derivatives(prc_inst *c, double *out) {
+    const int nx = c->net.nx, nu = c->net.nu;
+    const double *x = states(c);
+    int i, j;
+    load_inputs(c);
+    for (i = 0; i < nx; i++) {
+        double s = 0.0;
+        for (j = 0; j < nx; j++) s += c->net.A[(size_t)i * nx + j] * x[j];
+        for (j = 0; j < nu; j++) s += c->net.B[(size_t)i * nu + j] * c->u[j];
+        out[i] = s;
+    }
+}
+
+static double output_value(prc_inst *c, const prc_output *o) {
+    const int nx = c->net.nx, nu = c->net.nu;
+    const double *x = states(c);
+    double s = 0.0;
+    int j;
+    load_inputs(c);
+    if (o->kind == PRC_OUT_STATE) return x[o->index];
+    if (o->kind == PRC_OUT_INPUT) return c->u[o->index];
+    for (j = 0; j < nx; j++) s += c->net.Cv[(size_t)o->index * nx + j] * x[j];
+    for (j = 0; j < nu; j++) s += c->net.Dv[(size_t)o->index * nu + j] * c->u[j];
+    return s;
+}
+
+static void restore_start(prc_inst *c) {
+    memcpy(c->r, c->m->real_start, sizeof(double) * (size_t)c->m->n_real);
+    if (c->m->n_int) memcpy(c->iv, c->m->int_start, sizeof(int) * (size_t)c->m->n_int);
+    c->dirty = 1;
+    c->time = 0.0;
+    c->state = ST_INSTANTIATED;
+}
+
+/* Time events: advance the PRBS over every switching instant up to t (tolerance tol). */
+static int catch_up(prc_inst *c, double t, double tol) {
+    int changed = 0;
+    if (!has_bridge(c->m)) return 0;
+    while (next_switch(c) <= t + tol) {
+        advance_bit(c);
+        changed = 1;
+    }
+    return changed;
+}
+
+static double switch_tol(prc_inst *c, double h) {
+    double tclk = 1.0 / fclk(c);
+    double base = h > 0.0 && h < tclk ? h : tclk;
+    return 1e-9 * base;
+}
+
+/* ------------------------------------------------------------------ common functions */
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[]) {
+    prc_inst *c = (prc_inst *)comp;
+    (void)nCategories;
+    (void)categories;
+    if (!c) return fmi2Error;
+    c->logging = loggingOn ? 1 : 0;
+    return fmi2OK;
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn) {
+    const prc_model *m = &PRC_MODEL;
+    prc_inst *c;
+    int nx = nx_of(m), nu = nu_of(m), n = nx + nu, i;
+    (void)fmuResourceLocation;
+    (void)visible;
+    if (!functions || !functions->allocateMemory || !functions->freeMemory) return NULL;
+    c = (prc_inst *)functions->allocateMemory(1, sizeof(prc_inst));
+    if (!c) return NULL;
+    c->m = m;
+    c->cb = *functions;
+    c->type = fmuType;
+    c->logging = loggingOn ? 1 : 0;
+    c->name = (char *)alloc(c, strlen(instanceName ? instanceName : "") + 1, 1);
+    strcpy(c->name, instanceName ? instanceName : "");
+    if (!fmuGUID || strcmp(fmuGUID, m->guid) != 0) {
+        logmsg(c, fmi2Error, "logStatusError", "fmi2Instantiate: GUID '%s' does not match the FMU ('%s')",
+               fmuGUID ? fmuGUID : "(null)", m->guid);
+        functions->freeMemory(c->name);
+        functions->freeMemory(c);
+        return NULL;
+    }
+    c->r = (double *)alloc(c, (size_t)m->n_real, sizeof(double));
+    c->iv = (int *)alloc(c, (size_t)m->n_int, sizeof(int));
+    c->net.N = m->n_nodes;
+    c->net.nx = nx;
+    c->net.nu = nu;
+    c->net.A = (double *)alloc(c, (size_t)nx * nx, sizeof(double));
+    c->net.B = (double *)alloc(c, (size_t)nx * nu, sizeof(double));
+    c->net.Cv = (double *)alloc(c, (size_t)m->n_nodes * nx, sizeof(double));
+    c->net.Dv = (double *)alloc(c, (size_t)m->n_nodes * nu, sizeof(double));
+    c->u = (double *)alloc(c, (size_t)nu, sizeof(double));
+    c->dx = (double *)alloc(c, (size_t)nx, sizeof(double));
+    c->scratch = (double *)alloc(c, prc_network_scratch(m), sizeof(double));
+    c->aug = (double *)alloc(c, (size_t)n * n, sizeof(double));
+    c->augexp = (double *)alloc(c, (size_t)n * n, sizeof(double));
+    c->work = (double *)alloc(c, PRC_EXPM_WORK(n), sizeof(double));
+    c->ipiv = (int *)alloc(c, (size_t)n, sizeof(int));
+    for (i = 0; i < PRC_CACHE; i++) {
+        c->cache[i].Phi = (double *)alloc(c, (size_t)nx * nx, sizeof(double));
+        c->cache[i].Gam = (double *)alloc(c, (size_t)nx * nu, sizeof(double));
+    }
+    restore_start(c);
+    return c;
+}
+
+void fmi2FreeInstance(fmi2Component comp) {
+    prc_inst *c = (prc_inst *)comp;
+    fmi2CallbackFreeMemory f;
+    int i;
+    if (!c) return;
+    f = c->cb.freeMemory;
+    for (i = 0; i < PRC_CACHE; i++) {
+        f(c->cache[i].Phi);
+        f(c->cache[i].Gam);
+    }
+    f(c->r); f(c->iv); f(c->net.A); f(c->net.B); f(c->net.Cv); f(c->net.Dv);
+    f(c->u); f(c->dx); f(c->scratch); f(c->aug); f(c->augexp); f(c->work); f(c->ipiv);
+    f(c->name);
+    f(c);
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
+    prc_inst *c = (prc_inst *)comp;
+    (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
+    if (!c || c->state != ST_INSTANTIATED) return fmi2Error;
+    c->time = startTime;
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
+    prc_inst *c = (prc_inst *)comp;
+    if (!c || c->state != ST_INSTANTIATED) return fmi2Error;
+    c->state = ST_INIT;
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
+    prc_inst *c = (prc_inst *)comp;
+    fmi2Status s;
+    if (!c || c->state != ST_INIT) return c ? fail(c, "fmi2ExitInitializationMode", "not in initialization mode") : fmi2Error;
+    s = ensure_built(c, "fmi2ExitInitializationMode");
+    if (s != fmi2OK) return s;
+    reset_prbs(c);
+    if (has_bridge(c->m)) catch_up(c, c->time, switch_tol(c, 0.0));
+    c->state = ST_RUN;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Terminate(fmi2Component comp) {
+    prc_inst *c = (prc_inst *)comp;
+    if (!c) return fmi2Error;
+    c->state = ST_TERMINATED;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component comp) {
+    prc_inst *c = (prc_inst *)comp;
+    if (!c) return fmi2Error;
+    restore_start(c);
+    return fmi2OK;
+}
+
+static int is_output(const prc_model *m, int vr, const prc_output **o) {
+    int k;
+    for (k = 0; k < m->n_out; k++)
+        if (m->outputs[k].vr == vr) {
+            *o = &m->outputs[k];
+            return 1;
+        }
+    return 0;
+}
+
+fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
+    prc_inst *c = (prc_inst *)comp;
+    const prc_model *m;
+    size_t i;
+    int built = 0, nx;
+    if (!c) return fmi2Error;
+    m = c->m;
+    nx = nx_of(m);
+    for (i = 0; i < nvr; i++) {
+        int v = (int)vr[i];
+        const prc_output *o;
+        if (v < 0 || v >= m->n_real) return fail(c, "fmi2GetReal", "unknown value reference %d", v);
+        if (c->state == ST_INSTANTIATED) {
+            value[i] = c->r[v];
+            continue;
+        }
+        if (!built) {
+            if (ensure_built(c, "fmi2GetReal") != fmi2OK) return fmi2Error;
+            built = 1;
+        }
+        if (is_output(m, v, &o)) {
+            value[i] = output_value(c, o);
+        } else if (v >= m->vr_deriv0 && v < m->vr_deriv0 + nx) {
+            derivatives(c, c->dx);
+            value[i] = c->dx[v - m->vr_deriv0];
+        } else {
+            value[i] = c->r[v];
+        }
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
+    prc_inst *c = (prc_inst *)comp;
+    size_t i;
+    if (!c) return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        if ((int)vr[i] >= c->m->n_int) return fail(c, "fmi2GetInteger", "unknown value reference %u", vr[i]);
+        value[i] = c->iv[vr[i]];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
+    (void)value;
+    return nvr == 0 ? fmi2OK : fail((prc_inst *)comp, "fmi2GetBoolean", "the FMU has no Boolean variables (vr %u)", vr[0]);
+}
+
+fmi2Status fmi2GetString(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
+    (void)value;
+    return nvr == 0 ? fmi2OK : fail((prc_inst *)comp, "fmi2GetString", "the FMU has no String variables (vr %u)", vr[0]);
+}
+
+static fmi2Status check_settable(prc_inst *c, const char *fn, unsigned char how, const char *name) {
+    if (how == PRC_SET_ALWAYS && c->state != ST_TERMINATED && c->state != ST_ERROR) return fmi2OK;
+    if (how == PRC_SET_INIT && (c->state == ST_INSTANTIATED || c->state == ST_INIT)) return fmi2OK;
+    if (how == PRC_SET_NEVER) return fail(c, fn, "variable '%s' cannot be set", name);
+    return fail(c, fn, "variable '%s' can only be set before the end of initialization", name);
+}
+
+fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
+    prc_inst *c = (prc_inst *)comp;
+    const prc_model *m;
+    size_t i;
+    if (!c) return fmi2Error;
+    m = c->m;
+    for (i = 0; i < nvr; i++) {
+        int v = (int)vr[i];
+        if (v < 0 || v >= m->n_real) return fail(c, "fmi2SetReal", "unknown value reference %d", v);
+        if (check_settable(c, "fmi2SetReal", m->real_settable[v], m->real_names[v]) != fmi2OK) return fmi2Error;
+        if (v == m->vr_vdc && !(isfinite(value[i]) && value[i] > 0.0))
+            return fail(c, "fmi2SetReal", "parameter 'vdc' must be positive (got %g V)", value[i]);
+        c->r[v] = value[i];
+        if (m->real_settable[v] == PRC_SET_INIT && (v < m->vr_state0 || v >= m->vr_state0 + nx_of(m)))
+            c->dirty = 1;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
+    prc_inst *c = (prc_inst *)comp;
+    size_t i;
+    if (!c) return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        int v = (int)vr[i];
+        if (v < 0 || v >= c->m->n_int) return fail(c, "fmi2SetInteger", "unknown value reference %d", v);
+        if (check_settable(c, "fmi2SetInteger", c->m->int_settable[v], c->m->int_names[v]) != fmi2OK)
+            return fmi2Error;
+        c->iv[v] = value[i];
+        c->dirty = 1;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
+    (void)value;
+    return nvr == 0 ? fmi2OK : fail((prc_inst *)comp, "fmi2SetBoolean", "the FMU has no Boolean variables (vr %u)", vr[0]);
+}
+
+fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
+    (void)value;
+    return nvr == 0 ? fmi2OK : fail((prc_inst *)comp, "fmi2SetString", "the FMU has no String variables (vr %u)", vr[0]);
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
+    (void)FMUstate;
+    return fail((prc_inst *)comp, "fmi2GetFMUstate", "not supported");
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
+    (void)FMUstate;
+    return fail((prc_inst *)comp, "fmi2SetFMUstate", "not supported");
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
+    (void)FMUstate;
+    return fail((prc_inst *)comp, "fmi2FreeFMUstate", "not supported");
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate FMUstate, size_t *size) {
+    (void)FMUstate; (void)size;
+    return fail((prc_inst *)comp, "fmi2SerializedFMUstateSize", "not supported");
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
+    (void)FMUstate; (void)serializedState; (void)size;
+    return fail((prc_inst *)comp, "fmi2SerializeFMUstate", "not supported");
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serializedState[], size_t size,
+                                   fmi2FMUstate *FMUstate) {
+    (void)serializedState; (void)size; (void)FMUstate;
+    return fail((prc_inst *)comp, "fmi2DeSerializeFMUstate", "not supported");
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
+    (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
+    return fail((prc_inst *)comp, "fmi2GetDirectionalDerivative", "not supported");
+}
+
+/* ------------------------------------------------------------------ model exchange */
+
+fmi2Status fmi2EnterEventMode(fmi2Component comp) {
+    return comp ? fmi2OK : fmi2Error;
+}
+
+fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
+    prc_inst *c = (prc_inst *)comp;
+    if (!c) return fmi2Error;
+    if (ensure_built(c, "fmi2NewDiscreteStates") != fmi2OK) return fmi2Error;
+    info->newDiscreteStatesNeeded = fmi2False;
+    info->terminateSimulation = fmi2False;
+    info->nominalsOfContinuousStatesChanged = fmi2False;
+    info->valuesOfContinuousStatesChanged = fmi2False;
+    info->nextEventTimeDefined = fmi2False;
+    info->nextEventTime = 0.0;
+    if (has_bridge(c->m)) {
+        catch_up(c, c->time, switch_tol(c, 0.0));
+        info->nextEventTimeDefined = fmi2True;
+        info->nextEventTime = next_switch(c);
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterContinuousTimeMode(fmi2Component comp) {
+    return comp ? fmi2OK : fmi2Error;
+}
+
+fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!comp) return fmi2Error;
+    *enterEventMode = fmi2False;
+    *terminateSimulation = fmi2False;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
+    prc_inst *c = (prc_inst *)comp;
+    if (!c) return fmi2Error;
+    c->time = time;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
+    prc_inst *c = (prc_inst *)comp;
+    if (!c || (int)nx != nx_of(c->m)) return fmi2Error;
+    memcpy(states(c), x, sizeof(double) * nx);
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivs[], size_t nx) {
+    prc_inst *c = (prc_inst *)comp;
+    if (!c || (int)nx != nx_of(c->m)) return fmi2Error;
+    if (ensure_built(c, "fmi2GetDerivatives") != fmi2OK) return fmi2Error;
+    derivatives(c, derivs);
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real eventIndicators[], size_t ni) {
+    (void)eventIndicators;
+    return comp && ni == 0 ? fmi2OK : fmi2Error;
+}
+
+fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) {
+    prc_inst *c = (prc_inst *)comp;
+    if (!c || (int)nx != nx_of(c->m)) return fmi2Error;
+    memcpy(x, states(c), sizeof(double) * nx);
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real x_nominal[], size_t nx) {
+    size_t i;
+    if (!comp) return fmi2Error;
+    for (i = 0; i < nx; i++) x_nominal[i] = 1.0;
+    return fmi2OK;
+}
+
+/* ------------------------------------------------------------------ co-simulation */
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[]) {
+    (void)vr; (void)nvr; (void)order; (void)value;
+    return fail((prc_inst *)comp, "fmi2SetRealInputDerivatives", "inputs are held constant (zero-order hold)");
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[]) {
+    (void)vr; (void)nvr; (void)order; (void)value;
+    return fail((prc_inst *)comp, "fmi2GetRealOutputDerivatives", "not supported");
+}
+
+fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t0, fmi2Real h, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
+    prc_inst *c = (prc_inst *)comp;
+    double t, t_end, tol;
+    int first = 1;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!c) return fmi2Error;
+    if (c->state != ST_RUN) return fail(c, "fmi2DoStep", "not in step mode (initialize first)");
+    if (ensure_built(c, "fmi2DoStep") != fmi2OK) return fmi2Error;
+    if (!(h > 0.0)) return fail(c, "fmi2DoStep", "communication step size must be positive (got %g s)", h);
+    t = t0;
+    t_end = t0 + h;
+    tol = has_bridge(c->m) ? switch_tol(c, h) : 0.0;
+    if (has_bridge(c->m)) catch_up(c, t, tol);
+    for (;;) {
+        double seg_end = t_end, dt;
+        int split = 0;
+        if (has_bridge(c->m)) {
+            double ts = next_switch(c);
+            if (ts < t_end - tol) {
+                seg_end = ts;
+                split = 1;
+            }
+        }
+        dt = (first && !split) ? h : seg_end - t;
+        if (dt > 0.0 && zoh_step(c, dt))
+            return fail(c, "fmi2DoStep", "matrix exponential failed for step %g s", dt);
+        t = seg_end;
+        first = 0;
+        if (!split) break;
+        advance_bit(c);
+    }
+    if (has_bridge(c->m)) catch_up(c, t_end, tol);
+    c->time = t_end;
+    return fmi2OK;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component comp) {
+    return fail((prc_inst *)comp, "fmi2CancelStep", "doStep is never asynchronous");
+}
+
+fmi2Status fmi2GetStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Status *value) {
+    (void)s; (void)value;
+    return comp ? fmi2Discard : fmi2Error;
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Real *value) {
+    prc_inst *c = (prc_inst *)comp;
+    if (!c) return fmi2Error;
+    if (s == fmi2LastSuccessfulTime) {
+        *value = c->time;
+        return fmi2OK;
+    }
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Integer *value) {
+    (void)s; (void)value;
+    return comp ? fmi2Discard : fmi2Error;
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Boolean *value) {
+    if (!comp) return fmi2Error;
+    if (s == fmi2Terminated) {
+        *value = fmi2False;
+        return fmi2OK;
+    }
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component comp, const fmi2StatusKind s, fmi2String *value) {
+    (void)s; (void)value;
+    return comp ? fmi2Discard : fmi2Error;
+}

@@ -1,0 +1,209 @@
+"""Frequency-dependent elements realised as R-L ladders, so they stay simulable.
+
+The thesis's remedies for low-frequency misfit (2.4)-(2.6) are formulas in
+``f``: a skin-effect winding resistance, a core-loss resistance and a
+magnetising inductance that change with frequency. A formula cannot be
+simulated in the time domain or put into an FMU; a network can. Here each
+formula is fitted, over a frequency band, by a Foster R-L ladder
+
+.. math:: Z(s) = R_0 + s L_0 + \\sum_k \\frac{s L_k R_k}{R_k + s L_k},
+
+whose sections ``R_k || L_k`` have corner frequencies log-spaced over the
+band; non-negative least squares keeps every element positive, so the result
+is passive by construction. The ladder is inserted into a
+:class:`~pris_cosim.circuit.Circuit` in place of the element it models.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import nnls
+
+from .circuit import Circuit
+from .errors import CircuitError
+
+
+# ---------------------------------------------------------------------- formulas
+def skin_resistance(f: np.ndarray, r0: float, a: float, b: float, f0: float = 1e3) -> np.ndarray:
+    """Winding resistance with skin effect, ``R0 (1 + a (f/f0)^b)`` (Ohm)."""
+    return r0 * (1 + a * (np.asarray(f, float) / f0) ** b)
+
+
+def thesis_skin_resistance(f: np.ndarray, r_linear: float, a: float, b: float, c: float, f0: float) -> np.ndarray:
+    """Thesis (2.6): ``R_linear / c [1 + a (f/f0 - 1)^b]`` for ``f >= f0`` (Ohm); ``R_linear / c`` below."""
+    x = np.clip(np.asarray(f, float) / f0 - 1, 0, None)
+    return r_linear / c * (1 + a * x**b)
+
+
+def core_loss_resistance(f: np.ndarray, a: float, b: float) -> np.ndarray:
+    """Thesis (2.4): core-loss resistance ``a f / (f + b)`` (Ohm; ``b`` in Hz)."""
+    f = np.asarray(f, float)
+    return a * f / (f + b)
+
+
+def magnetising_inductance(f: np.ndarray, l_linear: float, a: float, b: float) -> np.ndarray:
+    """Thesis (2.5): ``a f^(-b) L_linear`` (H)."""
+    return a * np.asarray(f, float) ** (-b) * l_linear
+
+
+# ---------------------------------------------------------------------- ladder
+@dataclass(frozen=True)
+class FosterRL:
+    """A series chain ``R0 + s L0`` plus parallel ``R_k || L_k`` sections.
+
+    Attributes
+    ----------
+    r0 : float, Ohm
+    l0 : float, H
+    r, l : numpy.ndarray, Ohm, H
+        Section values (zero-valued sections are dropped).
+    """
+
+    r0: float
+    l0: float
+    r: np.ndarray
+    l: np.ndarray
+
+    def impedance(self, frequency_hz: np.ndarray) -> np.ndarray:
+        """Complex impedance (Ohm) at the given frequencies (Hz)."""
+        s = 2j * np.pi * np.asarray(frequency_hz, float)[:, None]
+        sections = (s * self.l * self.r / (self.r + s * self.l)).sum(axis=1) if self.r.size else 0.0
+        return self.r0 + s[:, 0] * self.l0 + sections
+
+    def resistance(self, frequency_hz: np.ndarray) -> np.ndarray:
+        """Real part, Ohm."""
+        return self.impedance(frequency_hz).real
+
+    def inductance(self, frequency_hz: np.ndarray) -> np.ndarray:
+        """Effective inductance ``Im Z / omega``, H."""
+        f = np.asarray(frequency_hz, float)
+        return self.impedance(f).imag / (2 * np.pi * f)
+
+    @property
+    def n_elements(self) -> int:
+        return int(self.r0 > 0) + int(self.l0 > 0) + 2 * self.r.size
+
+
+def _corners(fmin: float, fmax: float, n: int) -> np.ndarray:
+    if not 0 < fmin < fmax:
+        raise ValueError(f"need 0 < fmin < fmax (got {fmin}, {fmax})")
+    if n < 1:
+        raise ValueError(f"n_sections must be at least 1 (got {n})")
+    return 2 * np.pi * np.logspace(np.log10(fmin) - 0.5, np.log10(fmax) + 0.5, n)
+
+
+def fit_resistance(
+    r_of_f: Callable[[np.ndarray], np.ndarray], fmin: float, fmax: float, n_sections: int = 8, l0: float = 0.0
+) -> FosterRL:
+    """Ladder whose resistance follows ``r_of_f`` over ``[fmin, fmax]`` (relative least squares).
+
+    Section ``k`` contributes ``R_k (w/w_k)^2 / (1 + (w/w_k)^2)`` to the
+    resistance with corner ``w_k = R_k / L_k``; ``R0`` and ``R_k`` come from
+    NNLS, so all are non-negative.
+
+    Parameters
+    ----------
+    r_of_f : callable
+        Target resistance (Ohm) as a function of frequency (Hz).
+    fmin, fmax : float, Hz
+    n_sections : int
+    l0 : float, H
+        Series inductance kept in the chain (the branch's own inductance).
+    """
+    f = np.logspace(np.log10(fmin), np.log10(fmax), 200)
+    target = np.asarray(r_of_f(f), float)
+    if np.any(target < 0) or not np.all(np.isfinite(target)):
+        raise ValueError("target resistance must be finite and non-negative over the band")
+    wk = _corners(fmin, fmax, n_sections)
+    x = (2 * np.pi * f[:, None] / wk) ** 2
+    basis = np.column_stack([np.ones(f.size), x / (1 + x)])
+    weight = 1 / np.maximum(target, 1e-30)[:, None]
+    coef, _ = nnls(basis * weight, target * weight[:, 0])
+    keep = coef[1:] > 1e-12 * max(coef.max(), 1e-300)
+    r = coef[1:][keep]
+    return FosterRL(float(coef[0]), float(l0), r, r / wk[keep])
+
+
+def fit_inductance(
+    l_of_f: Callable[[np.ndarray], np.ndarray], fmin: float, fmax: float, n_sections: int = 8, r0: float = 0.0
+) -> FosterRL:
+    """Ladder whose effective inductance follows a decreasing ``l_of_f`` over ``[fmin, fmax]``.
+
+    Section ``k`` contributes ``L_k / (1 + (w/w_k)^2)``; ``L0`` is the
+    high-frequency limit. Coefficients by NNLS (all non-negative).
+
+    Parameters
+    ----------
+    l_of_f : callable
+        Target inductance (H) as a function of frequency (Hz).
+    fmin, fmax : float, Hz
+    n_sections : int
+    r0 : float, Ohm
+        Series resistance kept in the chain.
+    """
+    f = np.logspace(np.log10(fmin), np.log10(fmax), 200)
+    target = np.asarray(l_of_f(f), float)
+    if np.any(target <= 0) or not np.all(np.isfinite(target)):
+        raise ValueError("target inductance must be finite and positive over the band")
+    wk = _corners(fmin, fmax, n_sections)
+    x = (2 * np.pi * f[:, None] / wk) ** 2
+    basis = np.column_stack([np.ones(f.size), 1 / (1 + x)])
+    weight = 1 / target[:, None]
+    coef, _ = nnls(basis * weight, target * weight[:, 0])
+    keep = coef[1:] > 1e-12 * max(coef.max(), 1e-300)
+    l = coef[1:][keep]
+    return FosterRL(float(r0), float(coef[0]), l * wk[keep], l)
+
+
+# ---------------------------------------------------------------------- insertion
+def replace_with_ladder(circuit: Circuit, name: str, ladder: FosterRL) -> Circuit:
+    """A copy of ``circuit`` with element ``name`` replaced by ``ladder`` between the same nodes.
+
+    A resistor or an uncoupled inductor is removed and the chain takes its
+    place (elements ``<name>_r0``, ``<name>_l0``, ``<name>_r1``/``<name>_l1`` ...,
+    internal nodes ``<name>_n1`` ...). A coupled inductor keeps its couplings:
+    it stays in the chain with value ``ladder.l0`` and the sections are added
+    in series with it (their extra inductance is then uncoupled).
+
+    Raises
+    ------
+    CircuitError
+        Unknown element, a capacitor or coupling, or an element given by an
+        expression of other parameters.
+    """
+    element = circuit.element(name)
+    if element.kind not in "RL":
+        raise CircuitError(f"element {element.name!r}: only resistors and inductors can be made frequency dependent")
+    coupled = element.kind == "L" and any(element.key in (a.lower(), b.lower()) for a, b in (k.nodes for k in circuit.of_kind("K")))
+    prefix = element.name
+    chain: list[tuple[str, float]] = []
+    if ladder.r0 > 0:
+        chain.append(("R", ladder.r0))
+    if ladder.l0 > 0 and not coupled:
+        chain.append(("L", ladder.l0))
+    sections = list(zip(ladder.r, ladder.l))
+    n_series = len(chain) + len(sections) + (1 if coupled else 0)
+    if n_series == 0:
+        raise CircuitError(f"element {element.name!r}: the ladder is empty")
+    a, b = element.nodes
+    nodes = [a] + [f"{prefix}_n{i}".lower() for i in range(1, n_series)] + [b]
+    out = Circuit(circuit.title, [], list(circuit.parameters), list(circuit.ports), list(circuit.probes), list(circuit.comments))
+    for e in circuit.elements:
+        if e.key != element.key:
+            out.elements.append(e)
+            continue
+        pos = 0
+        if coupled:
+            out.elements.append(replace(e, nodes=(nodes[0], nodes[1]), value=float(ladder.l0)))
+            pos = 1
+        for kind, value in chain:
+            out.add(f"{kind}{prefix}_{kind.lower()}0", nodes[pos], nodes[pos + 1], value)
+            pos += 1
+        for k, (rk, lk) in enumerate(sections, start=1):
+            out.add(f"R{prefix}_r{k}", nodes[pos], nodes[pos + 1], float(rk))
+            out.add(f"L{prefix}_l{k}", nodes[pos], nodes[pos + 1], float(lk))
+            pos += 1
+    return out
