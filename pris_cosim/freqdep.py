@@ -22,8 +22,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import nnls
 
-from .circuit import Circuit
+from .circuit import GROUND, Circuit, Element
 from .errors import CircuitError
+from .expressions import Expression
 
 
 # ---------------------------------------------------------------------- formulas
@@ -158,7 +159,53 @@ def fit_inductance(
     return FosterRL(float(r0), float(coef[0]), l * wk[keep], l)
 
 
+def fit_impedance(
+    z_of_f: Callable[[np.ndarray], np.ndarray], fmin: float, fmax: float, n_sections: int = 10
+) -> FosterRL:
+    """Ladder whose complex impedance follows ``z_of_f`` over ``[fmin, fmax]``.
+
+    Every term of the ladder is linear in its resistance for a fixed corner
+    frequency (``R_k (s/w_k) / (1 + s/w_k)``), so real and imaginary parts are
+    fitted together by non-negative least squares, relative to ``|Z|``. Use it
+    for causal targets such as the fractional skin-effect impedance
+    ``R (1 + a (j f/f0)^b)``.
+
+    Parameters
+    ----------
+    z_of_f : callable
+        Target impedance (Ohm, complex) as a function of frequency (Hz).
+    fmin, fmax : float, Hz
+    n_sections : int
+    """
+    f = np.logspace(np.log10(fmin), np.log10(fmax), 200)
+    target = np.asarray(z_of_f(f), complex)
+    if not np.all(np.isfinite(target)) or np.any(target.real < 0):
+        raise ValueError("target impedance must be finite with a non-negative real part over the band")
+    wk = _corners(fmin, fmax, n_sections)
+    s = 1j * 2 * np.pi * f[:, None]
+    basis = np.column_stack([np.ones(f.size), s[:, 0], (s / wk) / (1 + s / wk)])
+    weight = 1 / np.maximum(np.abs(target), 1e-30)[:, None]
+    a = np.vstack([(basis * weight).real, (basis * weight).imag])
+    b = np.concatenate([(target * weight[:, 0]).real, (target * weight[:, 0]).imag])
+    col = np.abs(a).max(axis=0)
+    col[col == 0] = 1.0
+    coef, _ = nnls(a / col, b)
+    coef = coef / col
+    r = coef[2:]
+    keep = r > 1e-12 * max(r.max(initial=0.0), 1e-300)
+    return FosterRL(float(coef[0]), float(coef[1]), r[keep], r[keep] / wk[keep])
+
+
 # ---------------------------------------------------------------------- insertion
+def _series_inductor(circuit: Circuit, element: Element) -> Element | None:
+    """The inductor in series with ``element`` through a node that joins only the two of them."""
+    for node in element.nodes:
+        others = [e for e in circuit.elements if e.kind != "K" and node in e.nodes and e.key != element.key]
+        if node != GROUND and len(others) == 1 and others[0].kind == "L":
+            return others[0]
+    return None
+
+
 def replace_with_ladder(circuit: Circuit, name: str, ladder: FosterRL) -> Circuit:
     """A copy of ``circuit`` with element ``name`` replaced by ``ladder`` between the same nodes.
 
@@ -179,10 +226,11 @@ def replace_with_ladder(circuit: Circuit, name: str, ladder: FosterRL) -> Circui
         raise CircuitError(f"element {element.name!r}: only resistors and inductors can be made frequency dependent")
     coupled = element.kind == "L" and any(element.key in (a.lower(), b.lower()) for a, b in (k.nodes for k in circuit.of_kind("K")))
     prefix = element.name
+    series_l = _series_inductor(circuit, element) if element.kind == "R" and ladder.l0 > 0 else None
     chain: list[tuple[str, float]] = []
     if ladder.r0 > 0:
         chain.append(("R", ladder.r0))
-    if ladder.l0 > 0 and not coupled:
+    if ladder.l0 > 0 and not coupled and series_l is None:
         chain.append(("L", ladder.l0))
     sections = list(zip(ladder.r, ladder.l))
     n_series = len(chain) + len(sections) + (1 if coupled else 0)
@@ -192,6 +240,10 @@ def replace_with_ladder(circuit: Circuit, name: str, ladder: FosterRL) -> Circui
     nodes = [a] + [f"{prefix}_n{i}".lower() for i in range(1, n_series)] + [b]
     out = Circuit(circuit.title, [], list(circuit.parameters), list(circuit.ports), list(circuit.probes), list(circuit.comments))
     for e in circuit.elements:
+        if series_l is not None and e.key == series_l.key:
+            total = e.value + ladder.l0 if isinstance(e.value, float) else Expression(f"({e.value.text.strip('{}')}) + {ladder.l0!r}")
+            out.elements.append(replace(e, value=total))
+            continue
         if e.key != element.key:
             out.elements.append(e)
             continue

@@ -201,6 +201,45 @@ class ResponseModel:
         out = self._combine(z)
         return {k: v[0] if scalar else v for k, v in out.items()}
 
+    def evaluate_pointwise(
+        self,
+        frequency_hz: Sequence[float] | np.ndarray,
+        overrides: Mapping[str, Numeric] | None = None,
+        per_frequency: Mapping[str, np.ndarray] | None = None,
+    ) -> dict[str, np.ndarray]:
+        """Responses with element values that change with frequency (dense solve per point).
+
+        Parameters
+        ----------
+        frequency_hz : array_like, Hz
+            ``F`` frequencies.
+        overrides : mapping, optional
+            Scalar parameter or element values.
+        per_frequency : mapping, optional
+            Element (or parameter) name to an array of ``F`` values, one per
+            frequency: a skin-effect resistance R(f), an inductance L(f).
+            Resistor values may be complex (a frequency-dependent impedance).
+
+        Returns
+        -------
+        dict
+            Response name to complex array of shape ``(F,)``.
+        """
+        f = np.asarray(frequency_hz, dtype=float)
+        over = dict(overrides or {})
+        for name, v in (per_frequency or {}).items():
+            arr = np.asarray(v)
+            if arr.shape != f.shape:
+                raise CircuitError(f"per-frequency values of {name!r}: expected shape {f.shape}, got {arr.shape}")
+            over[name] = arr
+        values = self.circuit.resolve(over, check=False)
+        self.circuit.check_values({k: np.abs(v) for k, v in values.items()})
+        self.circuit.check_passive({k: np.real(v) for k, v in values.items()}, strict=False)
+        values = {k: np.broadcast_to(np.asarray(v), f.shape) for k, v in values.items()}
+        z = self.mna.solve_pointwise(values, 2j * np.pi * f, self._out_index)[:, :, 0]
+        out = self._combine(z.T[None])
+        return {k: v[0] for k, v in out.items()}
+
     def _fast(self, values: Mapping[str, Numeric], s: np.ndarray) -> np.ndarray:
         ss = self.mna.state_space(values).select([f"v({n})" for n in self._out_nodes])
         pr, cond = poles_residues(ss)

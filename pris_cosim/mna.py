@@ -169,13 +169,14 @@ class MNA:
         def column(elements: Sequence, transform=None) -> np.ndarray:
             if not elements:
                 return np.zeros((P, 0))
-            cols = [np.broadcast_to(np.asarray(values[e.key], float), (P,)) for e in elements]
+            cols = [np.broadcast_to(_real_or_complex(values[e.key]), (P,)) for e in elements]
             out = np.stack(cols, axis=1)
             return transform(out) if transform else out
 
         G = (column(self.resistors, lambda r: 1.0 / r) @ self.Sg).reshape(P, N, N)
         Cn = (column(self.capacitors) @ self.Sc).reshape(P, N, N)
-        full = {k: np.broadcast_to(np.asarray(v, float), (P,)) for k, v in values.items()}
+        magnetic = [e.key for e in self.inductors] + [k.key for k in self.circuit.of_kind("K")]
+        full = {k: np.broadcast_to(np.real(np.asarray(values[k])).astype(float), (P,)) for k in magnetic}
         L = self.circuit.inductance_matrix(full).reshape(P, len(self.inductors), len(self.inductors))
         return G, Cn, L
 
@@ -308,6 +309,54 @@ class MNA:
                 x = np.linalg.solve(K, np.broadcast_to(rhs, K.shape[:2] + rhs.shape))
                 out[p0 : p0 + p_chunk, :, :, f0 : f0 + chunk] = np.moveaxis(x[:, :, list(outputs), :], 1, -1)
         return out
+
+
+    def solve_pointwise(self, values: Mapping[str, Numeric], s: np.ndarray, outputs: Sequence[int]) -> np.ndarray:
+        """Node voltages per unit input where every parameter set has its own frequency.
+
+        This is how frequency-dependent element values are evaluated: flatten
+        (parameter set, frequency) pairs into one population of length Q and
+        give each its own complex frequency.
+
+        Parameters
+        ----------
+        values : mapping
+            Resolved element values, arrays of length Q (or scalars).
+        s : numpy.ndarray
+            Complex frequencies, rad/s, shape ``(Q,)``.
+        outputs : sequence of int
+            Node indices wanted.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape ``(Q, len(outputs), nu)``.
+        """
+        G, Cn, L = self.matrices(values)
+        Q = s.size
+        if G.shape[0] not in (1, Q):
+            raise CircuitError(f"pointwise solve: {G.shape[0]} parameter sets for {Q} frequencies")
+        N, m, q = len(self.nodes), L.shape[1], self.AV.shape[1]
+        n = N + m + q
+        nI = self.BI.shape[1]
+        K = np.zeros((Q, n, n), complex)
+        K[:, :N, :N] = G + s[:, None, None] * Cn
+        K[:, :N, N : N + m] = self.AL
+        K[:, N : N + m, :N] = -self.AL.T
+        K[:, N : N + m, N : N + m] = s[:, None, None] * L
+        K[:, :N, N + m :] = self.AV
+        K[:, N + m :, :N] = self.AV.T
+        rhs = np.zeros((n, nI + self.BV.shape[1]))
+        rhs[:N, :nI] = self.BI
+        rhs[N + m :, nI:] = self.BV
+        x = np.linalg.solve(K, np.broadcast_to(rhs, (Q,) + rhs.shape))
+        return x[:, list(outputs), :]
+
+
+def _real_or_complex(v: Numeric) -> np.ndarray:
+    """Element values as float arrays, or complex where a frequency-dependent impedance is complex."""
+    a = np.asarray(v)
+    return a.astype(complex if np.iscomplexobj(a) else float)
 
 
 def population_size(values: Mapping[str, Numeric]) -> int:

@@ -59,6 +59,7 @@ class Model:
     circuit: Circuit
     configurations: dict[str, Configuration] = field(default_factory=dict)
     fixed: tuple[str, ...] = ()
+    family: tuple = ()
 
     @property
     def default_configurations(self) -> list[str]:
@@ -213,7 +214,17 @@ def cascade(
         c.add(f"K{i}{sep}{j}", f"L{i}", f"L{j}", float(kij))
     name = f"cascade-{n}" + ("-open" if neutral == "open" else "")
     return Model(name, f"{n}-section winding cascade (Fig. 2.6), neutral {neutral}: Zin", c,
-                 {"default": Configuration("default", "n1", (), (Response("Zin"),))})
+                 {"default": Configuration("default", "n1", (), (Response("Zin"),))}, family=("cascade", n, neutral))
+
+
+def lumped_rlc(r: float = 1.0, l: float = 1e-3, c: float = 1e-9, name: str = "lumped-rlc") -> Model:
+    """The simplest one-port winding: ``(R + sL) || C`` from ``in`` to ground."""
+    circuit = Circuit(title="Lumped R-L-C one-port", ports=["in"])
+    circuit.add("R1", "in", "x1", r)
+    circuit.add("L1", "x1", "0", l)
+    circuit.add("C1", "in", "0", c)
+    return Model(name, "Lumped one-port (R + sL) || C: Zin", circuit,
+                 {"default": Configuration("default", "in", (), (Response("Zin"),))}, family=("lumped",))
 
 
 # ---------------------------------------------------------------------- two-winding family
@@ -304,7 +315,8 @@ def two_winding(
         c.add(f"K{x}{y}", inductor[x], inductor[y], val(f"K{x}{y}"))
     for w in windings:
         c.add(f"K{w}c", inductor[w], "Lc", "{Kc}" if tied_core_coupling else val(f"K{w}c"))
-    return Model(name, description, c, two_winding_configurations(), fixed=("Lc",) if tied_core_coupling else ())
+    return Model(name, description, c, two_winding_configurations(), fixed=("Lc",) if tied_core_coupling else (),
+                 family=("two-winding", N, cab2, tied_core_coupling))
 
 
 _TABLE_5_4 = dict(

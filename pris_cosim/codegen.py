@@ -1,0 +1,576 @@
+"""C source of network FMUs, generated from the circuit description.
+
+One :class:`NetworkModel` describes an FMU: which circuit, which inputs and
+outputs, and the FMI variables (parameters with start values, states and
+derivatives). Everything is derived from a :class:`~pris_cosim.circuit.Circuit`
+and its compiled :class:`~pris_cosim.mna.MNA` topology; the generated
+``model.c`` holds only tables (element nodes, the constant reduction bases
+Q0/Q1, input maps, variable layout) and the parameter ties rendered with
+:meth:`Expression.to_c`. The hand-written runtime in ``pris_cosim/c``
+assembles G, Cn and L from element values at run time, reduces them to
+state-space form exactly as :meth:`MNA.state_space` does, and steps it.
+
+Three kinds of FMU:
+
+``source``
+    The PRIS source: PRBS-driven H-bridge, optional switch parasitics and
+    snubber, series Rpris-Lpris-Cpris. Input ``v_in`` (DUT terminal voltage,
+    V); outputs ``i_in`` (current into the DUT, A) and ``v_bprbs`` (V).
+``dut``
+    The device under test driven by a current. Input ``i_in`` (A) into the
+    port; outputs ``v_in`` (port voltage) and ``v_<probe>`` (V).
+``arrangement``
+    Source and DUT in one network (the monolithic reference). No input;
+    outputs ``v_in``, ``i_in``, ``v_bprbs`` and ``v_<probe>``.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from importlib import resources
+
+import numpy as np
+
+from .arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangement, source_circuit
+from .circuit import GROUND, Circuit
+from .errors import CircuitError, ExpressionError
+from .expressions import Expression
+from .mna import MNA
+from .signals import MAX_LENGTH_TAPS
+
+#: Runtime files copied into every FMU's ``sources/`` (C files are compiled).
+RUNTIME_FILES = (
+    "prc_model.h",
+    "prc_linalg.h",
+    "prc_linalg.c",
+    "prc_expm.h",
+    "prc_expm.c",
+    "prc_network.h",
+    "prc_network.c",
+    "prc_fmi2.c",
+)
+GENERATED_FILE = "model.c"
+
+SET_NEVER, SET_INIT, SET_ALWAYS = 0, 1, 2
+OUT_NODE, OUT_STATE, OUT_INPUT = 0, 1, 2
+SOURCE_TERMINAL_INPUT = "Vdut"
+
+_UNITS = {"R": "Ohm", "L": "H", "C": "F", "K": "1"}
+_KIND_WORDS = {"R": "resistance", "L": "inductance", "C": "capacitance", "K": "coupling coefficient"}
+
+
+@dataclass
+class Variable:
+    """One FMI 2.0 scalar variable.
+
+    Attributes
+    ----------
+    name : str
+    vr : int
+        Value reference (Real and Integer variables are numbered separately).
+    type : {"Real", "Integer"}
+    causality, variability : str
+        FMI 2.0 attributes.
+    initial : str or None
+        FMI 2.0 ``initial`` attribute (None: omitted).
+    start : float or int or None
+        Start value (None for calculated variables).
+    unit : str
+    description : str
+    settable : int
+        ``SET_NEVER``, ``SET_INIT`` (fixed parameters, state start values) or
+        ``SET_ALWAYS`` (inputs, tunable parameters).
+    exposed : bool
+        False for internal slots (tied element values) not listed in the
+        model description.
+    derivative_of : int or None
+        For a derivative, the vr of its state.
+    """
+
+    name: str
+    vr: int
+    type: str
+    causality: str
+    variability: str
+    initial: str | None
+    start: float | int | None
+    unit: str = ""
+    description: str = ""
+    settable: int = SET_NEVER
+    exposed: bool = True
+    derivative_of: int | None = None
+
+
+@dataclass
+class Output:
+    """An FMU output: a node voltage, a state or an input of the network."""
+
+    variable: Variable
+    kind: int
+    index: int
+
+
+@dataclass
+class NetworkModel:
+    """Everything needed to write an FMU's C source, model description and Modelica text.
+
+    Attributes
+    ----------
+    kind : {"source", "dut", "arrangement"}
+    identifier : str
+        FMI model identifier (a C identifier; the shared library's name).
+    circuit : Circuit
+        The network actually compiled (shorts applied; for the source the
+        terminal voltage enters through a V element ``Vdut``).
+    mna : MNA
+    description : str
+    port : str or None
+        Driven DUT node (None for the source).
+    settings : SourceSettings or None
+    real, integer : list of Variable
+    outputs : list of Output
+    input_vrs : list of int
+        Per network input (MNA order), the Real vr of the FMU input, -1 for
+        the H-bridge voltage.
+    bridge_input : int
+        Index of the bridge voltage in the network input vector, -1 if none.
+    element_vr : dict
+        Element key to the Real vr holding its value.
+    ties : list of str
+        C statements evaluating calculated values in dependency order.
+    """
+
+    kind: str
+    identifier: str
+    circuit: Circuit
+    mna: MNA
+    description: str
+    port: str | None
+    settings: SourceSettings | None
+    real: list[Variable] = field(default_factory=list)
+    integer: list[Variable] = field(default_factory=list)
+    outputs: list[Output] = field(default_factory=list)
+    input_vrs: list[int] = field(default_factory=list)
+    bridge_input: int = -1
+    element_vr: dict[str, int] = field(default_factory=dict)
+    ties: list[str] = field(default_factory=list)
+
+    @property
+    def has_bridge(self) -> bool:
+        return self.bridge_input >= 0
+
+    @property
+    def n_states(self) -> int:
+        return self.mna.n_states
+
+    def real_by_name(self, name: str) -> Variable:
+        for v in self.real:
+            if v.name == name:
+                return v
+        raise KeyError(name)
+
+    @property
+    def state_vr0(self) -> int:
+        return next(v.vr for v in self.real if v.causality == "local" and v.variability == "continuous"
+                    and v.derivative_of is None)
+
+    @property
+    def deriv_vr0(self) -> int:
+        return next(v.vr for v in self.real if v.derivative_of is not None)
+
+
+# ---------------------------------------------------------------------- circuits
+def source_terminal_circuit(settings: SourceSettings) -> Circuit:
+    """The PRIS source with the DUT replaced by a voltage input.
+
+    The source loop is a series connection, so the DUT terminal voltage can
+    enter as a V element ``Vdut`` in series between ``Rpris`` and ``Lpris``
+    with ``Cpris`` returned to ground: the loop current ``i(Lpris)`` is the
+    same as with the DUT at the end of the chain, and no voltage source
+    touches a capacitor (which the exact MNA reduction requires).
+
+    Parameters
+    ----------
+    settings : SourceSettings
+
+    Returns
+    -------
+    Circuit
+        Inputs ``Vbridge`` and ``Vdut`` (V); the DUT current is ``i(Lpris)``.
+    """
+    base = source_circuit(settings, terminal=GROUND)
+    sense = base.element(SENSE_INDUCTOR)
+    entry, exit_ = sense.nodes
+    elements = [replace(e, nodes=("src_vin", exit_)) if e.key == sense.key else e for e in base.elements]
+    c = Circuit(title="PRIS source, DUT terminal voltage as input", elements=elements)
+    c.add(SOURCE_TERMINAL_INPUT, entry, "src_vin", 0.0, source_spec="DC 0")
+    return c
+
+
+def _checked(circuit: Circuit) -> dict[str, float]:
+    """Resolved element values after the positivity and passivity checks."""
+    values = circuit.resolve(check=True)
+    circuit.check_passive(values, strict=True)
+    return {k: float(v) for k, v in values.items()}
+
+
+# ---------------------------------------------------------------------- variable layout
+class _Layout:
+    """FMI variables in value-reference order (Real and Integer numbered separately)."""
+
+    def __init__(self) -> None:
+        self.real: list[Variable] = []
+        self.integer: list[Variable] = []
+        self._names: set[str] = set()
+
+    def add(self, name: str, type_: str = "Real", **kw) -> Variable:
+        if name in self._names:
+            raise CircuitError(f"FMU variable name {name!r} is used twice; rename the parameter or element")
+        self._names.add(name)
+        target = self.real if type_ == "Real" else self.integer
+        var = Variable(name=name, vr=len(target), type=type_, **kw)
+        target.append(var)
+        return var
+
+
+def parameter_order(circuit: Circuit) -> list:
+    """The circuit's parameters ordered so that every tie follows the parameters it uses.
+
+    Raises
+    ------
+    ExpressionError
+        A tie names an unknown parameter, or ties form a cycle.
+    """
+    known = {p.key for p in circuit.parameters}
+    done: set[str] = set()
+    order = []
+    pending = list(circuit.parameters)
+    while pending:
+        rest = []
+        for p in pending:
+            used = p.value.names if isinstance(p.value, Expression) else frozenset()
+            if used - known:
+                raise ExpressionError(f"parameter {p.name!r}: unknown name {sorted(used - known)[0]!r} in {p.value.text!r}")
+            if used <= done:
+                order.append(p)
+                done.add(p.key)
+            else:
+                rest.append(p)
+        if len(rest) == len(pending):
+            raise ExpressionError(f"parameters {', '.join(p.name for p in rest)} depend on each other in a cycle")
+        pending = rest
+    return order
+
+
+def _assemble(
+    kind: str,
+    name: str,
+    description: str,
+    circuit: Circuit,
+    mna: MNA,
+    port: str | None,
+    settings: SourceSettings | None,
+    ext_input: tuple[str, str, str] | None,
+    outputs: Sequence[tuple[str, str, str, int, int]],
+) -> NetworkModel:
+    """Lay out the FMI variables of a network and collect its tie statements.
+
+    ``ext_input`` is ``(name, unit, description)`` of the FMU input; each
+    output is ``(name, unit, description, kind, index)``.
+    """
+    values = _checked(circuit)
+    lay = _Layout()
+    outs = [
+        Output(lay.add(n, causality="output", variability="continuous", initial="calculated", start=None,
+                       unit=u, description=d), k, i)
+        for n, u, d, k, i in outputs
+    ]
+    input_var = None
+    if ext_input is not None:
+        n, u, d = ext_input
+        input_var = lay.add(n, causality="input", variability="continuous", initial=None, start=0.0, unit=u,
+                            description=d, settable=SET_ALWAYS)
+    c_names: dict[str, str] = {}
+    ties: list[str] = []
+    env = circuit.parameter_values()
+    for p in parameter_order(circuit):
+        if isinstance(p.value, Expression):
+            var = lay.add(p.name, causality="calculatedParameter", variability="fixed", initial="calculated",
+                          start=None, unit=p.unit, description=p.description or f"= {p.value.text}")
+            ties.append(f"    r[{var.vr}] = {p.value.to_c(c_names)};  /* {p.name} */")
+        else:
+            var = lay.add(p.name, causality="parameter", variability="fixed", initial="exact",
+                          start=float(env[p.key]), unit=p.unit, description=p.description, settable=SET_INIT)
+        c_names[p.key] = f"r[{var.vr}]"
+    slots: dict[str, int] = {}
+    param_keys = {p.key for p in circuit.parameters}
+    tied = [e for e in circuit.of_kind("R", "L", "C", "K") if isinstance(e.value, Expression)]
+    for e in circuit.of_kind("R", "L", "C", "K"):
+        if isinstance(e.value, Expression):
+            continue
+        var = lay.add(e.name if e.key not in param_keys else f"{e.name}_elem", causality="parameter",
+                      variability="fixed", initial="exact", start=float(values[e.key]), unit=_UNITS[e.kind],
+                      description=f"{_KIND_WORDS[e.kind]} of element {e.name}", settable=SET_INIT)
+        slots[e.key] = var.vr
+    if settings is not None:
+        lay.add("vdc", causality="parameter", variability="tunable", initial="exact", start=float(settings.vdc),
+                unit="V", description="H-bridge DC voltage (levels +-vdc)", settable=SET_ALWAYS)
+        lay.add("fclk", causality="parameter", variability="fixed", initial="exact", start=float(settings.fclk),
+                unit="Hz", description="PRBS clock frequency", settable=SET_INIT)
+        lay.add("prbs_order", "Integer", causality="parameter", variability="fixed", initial="exact",
+                start=int(settings.prbs_order), description="LFSR order n (period 2^n - 1 bits)", settable=SET_INIT)
+        lay.add("prbs_seed", "Integer", causality="parameter", variability="fixed", initial="exact", start=0,
+                description="LFSR seed, first n output bits MSB first; 0 = all ones", settable=SET_INIT)
+    state_vars = []
+    for label in mna.states:
+        state_vars.append(lay.add(label, causality="local", variability="continuous", initial="exact", start=0.0,
+                                  unit="A" if label.startswith("i(") else "V", description="state",
+                                  settable=SET_INIT))
+    for sv in state_vars:
+        lay.add(f"der({sv.name})", causality="local", variability="continuous", initial="calculated", start=None,
+                unit=f"{sv.unit}/s", description=f"time derivative of {sv.name}", derivative_of=sv.vr)
+    for e in tied:  # internal slots, not in the model description
+        var = lay.add(f"__{e.key}", causality="local", variability="fixed", initial="calculated",
+                      start=float(values[e.key]), exposed=False, description=f"{e.name} = {e.value.text}")
+        slots[e.key] = var.vr
+        ties.append(f"    r[{var.vr}] = {e.value.to_c(c_names)};  /* {e.name} = {_comment(e.value.text)} */")
+    input_vrs = []
+    bridge = -1
+    for j, label in enumerate(mna.inputs):
+        if label == f"v({BRIDGE})":
+            input_vrs.append(-1)
+            bridge = j
+        else:
+            assert input_var is not None
+            input_vrs.append(input_var.vr)
+    return NetworkModel(kind=kind, identifier=_identifier(name), circuit=circuit, mna=mna, description=description,
+                        port=port, settings=settings, real=lay.real, integer=lay.integer, outputs=outs,
+                        input_vrs=input_vrs, bridge_input=bridge, element_vr=slots, ties=ties)
+
+
+def _identifier(name: str) -> str:
+    ident = re.sub(r"\W", "_", name.strip())
+    if not ident or ident[0].isdigit():
+        ident = "m_" + ident
+    return ident
+
+
+def _comment(text: str) -> str:
+    return text.replace("*/", "* /")
+
+
+def _probe_outputs(circuit: Circuit, mna: MNA, port: str) -> list[tuple[str, str, str, int, int]]:
+    return [(f"v_{p}", "V", f"voltage of node {p}", OUT_NODE, mna.nodes.index(p))
+            for p in circuit.probes if p != port and p in mna.nodes]
+
+
+def source_model(settings: SourceSettings, name: str = "pris_source") -> NetworkModel:
+    """The PRIS source FMU: input ``v_in`` (V), outputs ``i_in`` (A) and ``v_bprbs`` (V).
+
+    Parameters
+    ----------
+    settings : SourceSettings
+        Start values of the source parameters; switch parasitics and snubber
+        are part of the network when set.
+    name : str
+        Model identifier.
+    """
+    circuit = source_terminal_circuit(settings)
+    mna = MNA(circuit, voltage_inputs=[BRIDGE, SOURCE_TERMINAL_INPUT])
+    outputs = [
+        ("i_in", "A", "current from the source RLC into the DUT terminal", OUT_STATE,
+         mna.states.index(f"i({SENSE_INDUCTOR})")),
+        ("v_bprbs", "V", "commanded H-bridge voltage", OUT_INPUT, mna.inputs.index(f"v({BRIDGE})")),
+    ]
+    return _assemble("source", name, "PRIS source: PRBS-driven H-bridge and series RLC", circuit, mna, None, settings,
+                     ("v_in", "V", "DUT terminal voltage"), outputs)
+
+
+def dut_model(dut: Circuit, port: str, shorts: Sequence[str] = (), name: str = "dut") -> NetworkModel:
+    """The DUT FMU: input ``i_in`` (A) into ``port``; outputs ``v_in`` and probe voltages (V).
+
+    Parameters
+    ----------
+    dut : Circuit
+    port : str
+        Driven node.
+    shorts : sequence of str
+        Nodes tied to ground (test configuration).
+    name : str
+        Model identifier.
+    """
+    circuit = dut.shorted(shorts) if shorts else dut
+    port = circuit.require_node(port, "port")
+    if port == GROUND:
+        raise CircuitError("the driven port cannot be ground")
+    mna = MNA(circuit, current_inputs=[port])
+    outputs = [("v_in", "V", f"port voltage v({port})", OUT_NODE, mna.nodes.index(port))]
+    outputs += _probe_outputs(circuit, mna, port)
+    return _assemble("dut", name, f"{dut.title or 'DUT'} driven by a current at {port}", circuit, mna, port, None,
+                     ("i_in", "A", f"current injected into node {port}"), outputs)
+
+
+def arrangement_model(dut: Circuit, port: str, settings: SourceSettings, shorts: Sequence[str] = (),
+                      name: str = "pris_arrangement") -> NetworkModel:
+    """The monolithic FMU: PRIS source and DUT in one network, no input.
+
+    Outputs ``v_in``, ``i_in``, ``v_bprbs`` and the probe voltages.
+    """
+    circuit = pris_arrangement(dut, port, settings, shorts)
+    port = circuit.ports[0]
+    mna = MNA(circuit, voltage_inputs=[BRIDGE])
+    outputs = [
+        ("v_in", "V", f"DUT terminal voltage v({port})", OUT_NODE, mna.nodes.index(port)),
+        ("i_in", "A", "current from the source RLC into the DUT terminal", OUT_STATE,
+         mna.states.index(f"i({SENSE_INDUCTOR})")),
+        ("v_bprbs", "V", "commanded H-bridge voltage", OUT_INPUT, mna.inputs.index(f"v({BRIDGE})")),
+    ]
+    outputs += _probe_outputs(circuit, mna, port)
+    return _assemble("arrangement", name, circuit.title, circuit, mna, port, settings, None, outputs)
+
+
+# ---------------------------------------------------------------------- C text
+def _c_string(s: str | None) -> str:
+    if s is None:
+        return "NULL"
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _c_array(ctype: str, name: str, items: Sequence[str], per_line: int = 6) -> str:
+    """A static const C array (one dummy entry when empty: C has no zero-length arrays)."""
+    body = list(items) or ["0"]
+    lines = [", ".join(body[i:i + per_line]) for i in range(0, len(body), per_line)]
+    return f"static const {ctype} {name}[{len(body)}] = {{\n    " + ",\n    ".join(lines) + "\n};\n"
+
+
+def _num(x: float) -> str:
+    x = float(x)
+    if not np.isfinite(x):
+        raise CircuitError(f"cannot write non-finite value {x!r} into C source")
+    return repr(x)
+
+
+def _elements_c(name: str, elements: Sequence, model: NetworkModel, nodes: Sequence[str],
+                inductor_index: Mapping[str, int] | None = None) -> str:
+    rows = []
+    index = {n: i for i, n in enumerate(nodes)}
+    for e in elements:
+        if inductor_index is None:
+            a, b = (index[n] if n != GROUND else -1 for n in e.nodes)
+        else:
+            a, b = (inductor_index[n.lower()] for n in e.nodes)
+        expr = e.value.text if isinstance(e.value, Expression) else None
+        rows.append(f"{{{_c_string(e.name)}, {model.element_vr[e.key]}, {a}, {b}, {_c_string(expr)}}}")
+    if not rows:
+        rows = ["{NULL, 0, 0, 0, NULL}"]
+    return f"static const prc_elem {name}[{len(rows)}] = {{\n    " + ",\n    ".join(rows) + "\n};\n"
+
+
+def generate_model_c(model: NetworkModel, guid: str) -> str:
+    """The generated ``model.c`` of an FMU.
+
+    Parameters
+    ----------
+    model : NetworkModel
+    guid : str
+        The FMU's GUID (checked by ``fmi2Instantiate``).
+
+    Returns
+    -------
+    str
+        C99 source defining ``PRC_MODEL`` for the runtime in ``pris_cosim/c``.
+    """
+    mna, circuit = model.mna, model.circuit
+    nodes = mna.nodes
+    inductor_index = {e.key: i for i, e in enumerate(mna.inductors)}
+    real, ints = model.real, model.integer
+    taps = [0] * 33
+    for order, t in MAX_LENGTH_TAPS.items():
+        taps[order] = sum(1 << (k - 1) for k in t)
+    v_nodes = [str(nodes.index(n) if n != GROUND else -1) for v in mna.vsources for n in v.nodes]
+    out = [
+        f"/* Generated by pris_cosim.codegen from circuit {_comment(circuit.title or '(untitled)')!r}.",
+        f" * FMU kind: {model.kind}; {len(nodes)} nodes, {mna.n_states} states. Do not edit: regenerate. */",
+        "#include <math.h>",
+        "#include <stddef.h>",
+        "",
+        '#include "prc_model.h"',
+        "",
+        "/* node order: " + _comment(", ".join(nodes)) + " */",
+        "/* state order: " + _comment(", ".join(mna.states)) + " */",
+        "",
+        _c_array("double", "REAL_START", [_num(v.start) if v.start is not None else "0.0" for v in real], 4),
+        _c_array("char *const", "REAL_NAMES", [_c_string(v.name) for v in real], 4),
+        _c_array("unsigned char", "REAL_SETTABLE", [str(v.settable) for v in real], 16),
+        _c_array("int", "INT_START", [str(int(v.start)) for v in ints]),
+        _c_array("char *const", "INT_NAMES", [_c_string(v.name) for v in ints]),
+        _c_array("unsigned char", "INT_SETTABLE", [str(v.settable) for v in ints], 16),
+        _elements_c("RESISTORS", mna.resistors, model, nodes),
+        _elements_c("CAPACITORS", mna.capacitors, model, nodes),
+        _elements_c("INDUCTORS", mna.inductors, model, nodes),
+        _elements_c("COUPLINGS", circuit.of_kind("K"), model, nodes, inductor_index),
+        _c_array("int", "V_NODES", v_nodes, 16),
+        _c_array("double", "Q0", [_num(x) for x in mna.Q0.ravel()], 6),
+        _c_array("double", "Q1", [_num(x) for x in mna.Q1.ravel()], 6),
+        _c_array("double", "BI", [_num(x) for x in mna.BI.ravel()], 6),
+        _c_array("double", "BV", [_num(x) for x in mna.BV.ravel()], 6),
+        _c_array("int", "INPUT_VR", [str(v) for v in model.input_vrs], 16),
+        _c_array("prc_output", "OUTPUTS", [f"{{{o.variable.vr}, {o.kind}, {o.index}}}" for o in model.outputs], 4),
+        _c_array("unsigned int", "PRBS_TAPS", [f"{t:#x}u" for t in taps], 6),
+        "/* parameter ties and tied element values, in dependency order */",
+        "static void compute(double *r) {",
+        *(model.ties or ["    (void)r;"]),
+        "}",
+        "",
+        "const prc_model PRC_MODEL = {",
+        f"    {_c_string(guid)},",
+        f"    {len(real)}, REAL_START, REAL_NAMES, REAL_SETTABLE,",
+        f"    {len(ints)}, INT_START, INT_NAMES, INT_SETTABLE,",
+        f"    {len(nodes)},",
+        f"    {len(mna.resistors)}, {len(mna.capacitors)}, {len(mna.inductors)}, {len(circuit.of_kind('K'))}, "
+        f"{len(mna.vsources)},",
+        "    RESISTORS, CAPACITORS, INDUCTORS, COUPLINGS,",
+        "    V_NODES,",
+        f"    {mna.Q0.shape[1]}, {mna.Q1.shape[1]},",
+        "    Q0, Q1,",
+        f"    {mna.BI.shape[1]}, {mna.BV.shape[1]},",
+        "    BI, BV,",
+        "    INPUT_VR,",
+        f"    {model.bridge_input},",
+        f"    {model.state_vr0}, {model.deriv_vr0},",
+        f"    {len(model.outputs)}, OUTPUTS,",
+        f"    {_vr(model, 'vdc')}, {_vr(model, 'fclk')}, {_ivr(model, 'prbs_order')}, {_ivr(model, 'prbs_seed')},",
+        "    PRBS_TAPS,",
+        "    compute,",
+        "};",
+        "",
+    ]
+    return "\n".join(out)
+
+
+def _vr(model: NetworkModel, name: str) -> int:
+    return next((v.vr for v in model.real if v.name == name), -1)
+
+
+def _ivr(model: NetworkModel, name: str) -> int:
+    return next((v.vr for v in model.integer if v.name == name), -1)
+
+
+def runtime_sources() -> dict[str, str]:
+    """The hand-written C runtime files, by file name."""
+    pkg = resources.files("pris_cosim") / "c"
+    return {name: (pkg / name).read_text() for name in RUNTIME_FILES}
+
+
+def generate_sources(model: NetworkModel, guid: str) -> dict[str, str]:
+    """Every source file of the FMU (runtime plus generated ``model.c``), by file name."""
+    files = runtime_sources()
+    files[GENERATED_FILE] = generate_model_c(model, guid)
+    return files
+
+
+def c_source_files() -> list[str]:
+    """Names of the C files to compile, in build order."""
+    return [f for f in RUNTIME_FILES if f.endswith(".c")] + [GENERATED_FILE]
