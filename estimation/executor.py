@@ -41,6 +41,7 @@ import tempfile
 import time
 import traceback
 import uuid
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import suppress
 from dataclasses import dataclass, field
@@ -362,66 +363,103 @@ class _SerialBackend:
         pass
 
 
-class _FuturesBackend:
+class _WindowBackend:
+    """Keeps at most ``capacity()`` tasks in flight, submitting more as others finish.
+
+    Holding back the queue (rather than submitting everything at once) makes
+    :meth:`cancel` exact on every backend: nothing new starts, and the runs
+    already in flight finish and are stored.
+    """
+
+    name = ""
+
+    def __init__(self) -> None:
+        self._stopped = False
+
+    def submit(self, task: Task) -> Any:
+        raise NotImplementedError
+
+    def wait_first(self, futures: list[Any]) -> list[Any]:
+        """Futures among ``futures`` that are done (at least one), in the given order."""
+        raise NotImplementedError
+
+    def capacity(self) -> int:
+        raise NotImplementedError
+
+    def run(self, jobs: list[tuple[int, Task]]) -> Iterator[tuple[int, dict[str, Any]]]:
+        queue = deque(jobs)
+        in_flight: dict[Any, int] = {}
+        while queue or in_flight:
+            while queue and not self._stopped and len(in_flight) < max(1, self.capacity()):
+                index, task = queue.popleft()
+                in_flight[self.submit(task)] = index
+            if not in_flight:
+                return
+            for future in self.wait_first(list(in_flight)):
+                index = in_flight.pop(future)
+                try:
+                    outcome = future.result()
+                except Exception as exc:  # the worker died (BrokenProcessPool, KilledWorker) or unpickling failed
+                    outcome = _failure(exc)
+                yield index, outcome
+
+    def cancel(self) -> None:
+        self._stopped = True
+
+
+class _FuturesBackend(_WindowBackend):
     """A :mod:`concurrent.futures` executor (owned: shut down at the end)."""
 
-    def __init__(self, executor: cf.Executor, owned: bool, name: str) -> None:
+    def __init__(self, executor: cf.Executor, owned: bool, name: str, workers: int) -> None:
+        super().__init__()
         self.executor = executor
         self.owned = owned
         self.name = name
-        self._futures: dict[cf.Future[Any], int] = {}
+        self.workers = workers
 
-    def run(self, jobs: list[tuple[int, Task]]) -> Iterator[tuple[int, dict[str, Any]]]:
-        self._futures = {self.executor.submit(_execute, t.fn, dict(t.kwargs)): i for i, t in jobs}
-        for future in cf.as_completed(self._futures):
-            if future.cancelled():
-                continue
-            try:
-                outcome = future.result()
-            except Exception as exc:  # the worker died (BrokenProcessPool) or could not unpickle
-                outcome = _failure(exc)
-            yield self._futures[future], outcome
+    def submit(self, task: Task) -> cf.Future[Any]:
+        return self.executor.submit(_execute, task.fn, dict(task.kwargs))
 
-    def cancel(self) -> None:
-        for future in self._futures:
-            future.cancel()
+    def wait_first(self, futures: list[Any]) -> list[Any]:
+        done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
+        return [f for f in futures if f in done]
+
+    def capacity(self) -> int:
+        return self.workers
 
     def close(self, wait: bool) -> None:
         if self.owned:
             self.executor.shutdown(wait=wait, cancel_futures=True)
 
 
-class _DaskBackend:
-    """A :class:`distributed.Client` (owned when made here from an address: closed at the end)."""
+class _DaskBackend(_WindowBackend):
+    """A :class:`distributed.Client` (owned when made here from an address: closed at the end).
+
+    The window follows the cluster's current thread count, so workers that
+    join later are used.
+    """
 
     def __init__(self, client: Any, owned: bool) -> None:
+        super().__init__()
         self.client = client
         self.owned = owned
         self.name = f"dask {client.scheduler.address}"
-        self._futures: list[Any] = []
-
-    def run(self, jobs: list[tuple[int, Task]]) -> Iterator[tuple[int, dict[str, Any]]]:
+        self._batch = uuid.uuid4().hex[:8]
         from distributed import as_completed
 
-        batch = uuid.uuid4().hex[:8]
-        index = {}
-        for i, task in jobs:
-            future = self.client.submit(_execute, task.fn, dict(task.kwargs), key=f"{task.id}-{batch}", pure=False)
-            index[future.key] = i
-            self._futures.append(future)
-        for future in as_completed(self._futures, loop=self.client.loop):
-            if future.status == "cancelled":
-                continue
-            try:
-                outcome = future.result()
-            except Exception as exc:  # e.g. KilledWorker
-                outcome = _failure(exc)
-            yield index[future.key], outcome
+        self._completed = as_completed(loop=client.loop)
 
-    def cancel(self) -> None:
-        pending = [f for f in self._futures if not f.done()]
-        if pending:
-            self.client.cancel(pending)
+    def submit(self, task: Task) -> Any:
+        key = f"{task.id}-{self._batch}"
+        future = self.client.submit(_execute, task.fn, dict(task.kwargs), key=key, pure=False)
+        self._completed.add(future)
+        return future
+
+    def wait_first(self, futures: list[Any]) -> list[Any]:
+        return [next(self._completed)]
+
+    def capacity(self) -> int:
+        return sum(self.client.nthreads().values())
 
     def close(self, wait: bool) -> None:
         if self.owned:
@@ -445,7 +483,7 @@ def _make_backend(executor: Any, workers: int | None, jobs: int) -> Any:
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     if executor is None or executor == "processes":
         count = min(workers or os.cpu_count() or 1, max(1, jobs))
-        return _FuturesBackend(_process_pool(count), owned=True, name=f"processes ({count} workers)")
+        return _FuturesBackend(_process_pool(count), owned=True, name=f"processes ({count} workers)", workers=count)
     if executor == "serial":
         return _SerialBackend()
     if isinstance(executor, str) and ":" in executor:
@@ -453,7 +491,8 @@ def _make_backend(executor: Any, workers: int | None, jobs: int) -> Any:
 
         return _DaskBackend(Client(executor, set_as_default=False), owned=True)
     if isinstance(executor, cf.Executor):
-        return _FuturesBackend(executor, owned=False, name=type(executor).__name__)
+        count = workers or getattr(executor, "_max_workers", None) or os.cpu_count() or 1
+        return _FuturesBackend(executor, owned=False, name=type(executor).__name__, workers=count)
     if _is_dask_client(executor):
         return _DaskBackend(executor, owned=False)
     raise ValueError(
@@ -536,10 +575,12 @@ def run_tasks(
         (``[3/12] case 2 pso rmse done in 4.1 s``).
     workers : int, optional
         Process-pool size (default ``os.cpu_count()``, at most the number of
-        tasks to run).
+        tasks to run); for an executor passed in, how many tasks to keep in
+        flight (default: its worker count). A Dask cluster keeps one task per
+        worker thread in flight.
     on_error : {"raise", "continue"}
-        On a failing task, ``"raise"`` cancels tasks not yet started, lets
-        running ones finish (and stores them), then raises; ``"continue"``
+        On a failing task, ``"raise"`` starts no further task, lets those
+        already running finish (and stores them), then raises; ``"continue"``
         runs everything first. Either way :class:`TaskError` is raised at the
         end and failed tasks are not marked done (a rerun retries them).
 
@@ -575,7 +616,8 @@ def run_tasks(
         return results
     backend = _make_backend(executor, workers, len(todo))
     where = f" (results in {store.directory})" if store is not None else ""
-    _say(progress, f"{len(tasks)} task(s): {len(tasks) - len(todo)} already stored, {len(todo)} to run on {backend.name}{where}")
+    stored = len(tasks) - len(todo)
+    _say(progress, f"{len(tasks)} task(s): {stored} already stored, {len(todo)} to run on {backend.name}{where}")
     failures = _run_backend(backend, tasks, todo, results, store, progress, on_error)
     if failures:
         raise TaskError(failures, results)

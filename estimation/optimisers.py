@@ -214,7 +214,8 @@ def _is_int(value: Any) -> bool:
 
 
 def _is_real(value: Any) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and math.isfinite(value)
+    numeric = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    return numeric and math.isfinite(value)
 
 
 def _need_int(method: str, name: str, value: Any, minimum: int, optional: bool = False) -> None:
@@ -382,7 +383,9 @@ class MultistartOptions:
         _need_int(m, "n_trial", self.n_trial, 1)
         _need_int(m, "n_stage_one", self.n_stage_one, 1)
         if self.n_stage_one > self.n_trial:
-            raise ValueError(f"multistart: option 'n_stage_one' ({self.n_stage_one}) exceeds 'n_trial' ({self.n_trial})")
+            raise ValueError(
+                f"multistart: option 'n_stage_one' ({self.n_stage_one}) exceeds 'n_trial' ({self.n_trial})"
+            )
         _need_real(m, "distance_factor", self.distance_factor, 0.0)
         _need_real(m, "radius_factor", self.radius_factor, 0.0, 1.0)
         _need_real(m, "penalty_factor", self.penalty_factor, 0.0)
@@ -447,7 +450,9 @@ class GeneticOptions:
         _need_int(m, "pop_size", self.pop_size, 4, optional=True)
         _need_int(m, "elite_count", self.elite_count, 0, optional=True)
         if self.pop_size is not None and self.elite_count is not None and self.elite_count >= self.pop_size:
-            raise ValueError(f"genetic: option 'elite_count' ({self.elite_count}) must be < 'pop_size' ({self.pop_size})")
+            raise ValueError(
+                f"genetic: option 'elite_count' ({self.elite_count}) must be < 'pop_size' ({self.pop_size})"
+            )
         _need_real(m, "crossover_fraction", self.crossover_fraction, 0.0, 1.0)
         _need_choice(m, "crossover", self.crossover, ("scattered", "heuristic", "intermediate"))
         _need_real(m, "heuristic_ratio", self.heuristic_ratio, 0.0, open_low=True)
@@ -497,10 +502,11 @@ class ParticleSwarmOptions:
         m = "particle_swarm"
         _need_int(m, "swarm_size", self.swarm_size, 2, optional=True)
         ir = self.inertia_range
-        if not (
-            isinstance(ir, (tuple, list)) and len(ir) == 2 and all(_is_real(v) for v in ir) and 0 <= min(ir) and ir[0] <= ir[1]
-        ):
-            raise ValueError(f"particle_swarm: option 'inertia_range' must be (low, high) with 0 <= low <= high, got {ir!r}")
+        pair = isinstance(ir, (tuple, list)) and len(ir) == 2 and all(_is_real(v) for v in ir)
+        if not (pair and 0 <= ir[0] <= ir[1]):
+            raise ValueError(
+                f"particle_swarm: option 'inertia_range' must be (low, high) with 0 <= low <= high, got {ir!r}"
+            )
         _need_real(m, "self_weight", self.self_weight, 0.0)
         _need_real(m, "social_weight", self.social_weight, 0.0)
         _need_real(m, "min_neighbors_fraction", self.min_neighbors_fraction, 0.0, 1.0)
@@ -681,6 +687,10 @@ def _make_rng(seed: Any) -> tuple[int, np.random.Generator]:
         raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
     seed = int(seed)
     return seed, np.random.default_rng(seed)
+
+
+def _centre_if_none(x: np.ndarray | None, n: int) -> np.ndarray:
+    return np.full(n, 0.5) if x is None else x
 
 
 def _drive(
@@ -912,7 +922,7 @@ def local(
     o = _parse_options(LocalOptions, "local", options)
 
     def body(ev: _Evaluator, rng: np.random.Generator, x: np.ndarray | None) -> str:
-        start = np.full(ev.n, 0.5) if x is None else x
+        start = _centre_if_none(x, ev.n)
         return _local_solve(ev, start, o)[2]
 
     return _drive("local", fun, n, seed, budget, x0, callback, body)
@@ -985,7 +995,7 @@ def pattern_search(
     o = _parse_options(PatternSearchOptions, "pattern_search", options)
 
     def body(ev: _Evaluator, rng: np.random.Generator, x: np.ndarray | None) -> str:
-        return _pattern_body(ev, np.full(ev.n, 0.5) if x is None else x, o)
+        return _pattern_body(ev, _centre_if_none(x, ev.n), o)
 
     return _drive("pattern_search", fun, n, seed, budget, x0, callback, body)
 
@@ -1122,7 +1132,7 @@ def multistart(
     o = _parse_options(MultistartOptions, "multistart", options)
 
     def body(ev: _Evaluator, rng: np.random.Generator, x: np.ndarray | None) -> str:
-        return _multistart_body(ev, rng, np.full(ev.n, 0.5) if x is None else x, o)
+        return _multistart_body(ev, rng, _centre_if_none(x, ev.n), o)
 
     return _drive("multistart", fun, n, seed, budget, x0, callback, body)
 
@@ -1277,17 +1287,20 @@ class _SwarmState:
     stall: int = 0
 
     def update(self, improved: bool, inertia_range: tuple[float, float]) -> None:
+        """Adapt after an iteration; ``improved``: the swarm's best cost went down."""
         if improved:
             self.stall = max(0, self.stall - 1)
             self.neighbours = self.min_neighbours
-            if self.stall < 2:
-                self.inertia *= 2.0
-            elif self.stall > 5:
-                self.inertia /= 2.0
-            self.inertia = min(max(self.inertia, inertia_range[0]), inertia_range[1])
         else:
             self.stall += 1
             self.neighbours = min(self.neighbours + self.min_neighbours, self.size)
+        # Thesis 2.4.2.5: inertia rises while the best improves and falls after
+        # several iterations without improvement, so this runs in both cases.
+        if self.stall < 2:
+            self.inertia *= 2.0
+        elif self.stall > 5:
+            self.inertia /= 2.0
+        self.inertia = min(max(self.inertia, inertia_range[0]), inertia_range[1])
 
 
 def _pso_body(ev: _Evaluator, rng: np.random.Generator, x0: np.ndarray | None, o: ParticleSwarmOptions) -> str:
@@ -1371,9 +1384,10 @@ def particle_swarm(
 # --------------------------------------------------------------------------- #
 
 
+#: Global phases a hybrid can start with: options class and body ``(ev, rng, x0, options) -> message``.
 _GLOBAL_BODIES: dict[str, tuple[type, Callable[..., str]]] = {
-    "pattern_search": (PatternSearchOptions, lambda ev, rng, x, o: _pattern_body(ev, np.full(ev.n, 0.5) if x is None else x, o)),
-    "multistart": (MultistartOptions, lambda ev, rng, x, o: _multistart_body(ev, rng, np.full(ev.n, 0.5) if x is None else x, o)),
+    "pattern_search": (PatternSearchOptions, lambda ev, rng, x, o: _pattern_body(ev, _centre_if_none(x, ev.n), o)),
+    "multistart": (MultistartOptions, lambda ev, rng, x, o: _multistart_body(ev, rng, _centre_if_none(x, ev.n), o)),
     "genetic": (GeneticOptions, _genetic_body),
     "particle_swarm": (ParticleSwarmOptions, _pso_body),
 }
@@ -1425,7 +1439,8 @@ def hybrid(
     """
     name = _canonical(global_method)
     if name not in _GLOBAL_BODIES:
-        raise ValueError(f"hybrid: global_method must be one of {', '.join(sorted(_GLOBAL_BODIES))}, got {global_method!r}")
+        valid = ", ".join(sorted(_GLOBAL_BODIES))
+        raise ValueError(f"hybrid: global_method must be one of {valid}, got {global_method!r}")
     if not (_is_real(global_share) and 0.0 < global_share <= 1.0):
         raise ValueError(f"hybrid: global_share must be in (0, 1], got {global_share!r}")
     options_cls, global_body = _GLOBAL_BODIES[name]
@@ -1522,7 +1537,9 @@ def minimize(
     return single(fun, n, **common, **options)
 
 
-def _call_hybrid(fun: Objective, n: int, global_method: str, options: dict[str, Any], common: dict[str, Any]) -> OptimResult:
+def _call_hybrid(
+    fun: Objective, n: int, global_method: str, options: dict[str, Any], common: dict[str, Any]
+) -> OptimResult:
     valid = {"global_options", "local_options", "global_share"}
     unknown = sorted(set(options) - valid)
     if unknown:

@@ -192,6 +192,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _frf_parser(sub)
     _models_parser(sub)
+    from .cli_sim import register as register_simulation
+
+    register_simulation(sub)
     for ep in entry_points(group="pris_cosim.commands"):
         ep.load()(sub)
     return parser

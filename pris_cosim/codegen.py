@@ -26,12 +26,11 @@ Three kinds of FMU:
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from importlib import resources
-
-import numpy as np
 
 from .arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangement, source_circuit
 from .circuit import GROUND, Circuit
@@ -39,6 +38,7 @@ from .errors import CircuitError, ExpressionError
 from .expressions import Expression
 from .mna import MNA
 from .signals import MAX_LENGTH_TAPS
+from .timedomain import checked_values
 
 #: Runtime files copied into every FMU's ``sources/`` (C files are compiled).
 RUNTIME_FILES = (
@@ -53,8 +53,11 @@ RUNTIME_FILES = (
 )
 GENERATED_FILE = "model.c"
 
+#: When a variable may be set (``PRC_SET_*`` in prc_model.h).
 SET_NEVER, SET_INIT, SET_ALWAYS = 0, 1, 2
+#: What an output reads (``PRC_OUT_*`` in prc_model.h).
 OUT_NODE, OUT_STATE, OUT_INPUT = 0, 1, 2
+#: Name of the V element through which the source FMU receives the DUT terminal voltage.
 SOURCE_TERMINAL_INPUT = "Vdut"
 
 _UNITS = {"R": "Ohm", "L": "H", "C": "F", "K": "1"}
@@ -158,26 +161,14 @@ class NetworkModel:
     ties: list[str] = field(default_factory=list)
 
     @property
-    def has_bridge(self) -> bool:
-        return self.bridge_input >= 0
-
-    @property
-    def n_states(self) -> int:
-        return self.mna.n_states
-
-    def real_by_name(self, name: str) -> Variable:
-        for v in self.real:
-            if v.name == name:
-                return v
-        raise KeyError(name)
-
-    @property
     def state_vr0(self) -> int:
+        """Value reference of the first state (states have consecutive vrs)."""
         return next(v.vr for v in self.real if v.causality == "local" and v.variability == "continuous"
                     and v.derivative_of is None)
 
     @property
     def deriv_vr0(self) -> int:
+        """Value reference of the first state derivative."""
         return next(v.vr for v in self.real if v.derivative_of is not None)
 
 
@@ -208,12 +199,6 @@ def source_terminal_circuit(settings: SourceSettings) -> Circuit:
     c.add(SOURCE_TERMINAL_INPUT, entry, "src_vin", 0.0, source_spec="DC 0")
     return c
 
-
-def _checked(circuit: Circuit) -> dict[str, float]:
-    """Resolved element values after the positivity and passivity checks."""
-    values = circuit.resolve(check=True)
-    circuit.check_passive(values, strict=True)
-    return {k: float(v) for k, v in values.items()}
 
 
 # ---------------------------------------------------------------------- variable layout
@@ -252,7 +237,8 @@ def parameter_order(circuit: Circuit) -> list:
         for p in pending:
             used = p.value.names if isinstance(p.value, Expression) else frozenset()
             if used - known:
-                raise ExpressionError(f"parameter {p.name!r}: unknown name {sorted(used - known)[0]!r} in {p.value.text!r}")
+                unknown = sorted(used - known)[0]
+                raise ExpressionError(f"parameter {p.name!r}: unknown name {unknown!r} in {p.value.text!r}")
             if used <= done:
                 order.append(p)
                 done.add(p.key)
@@ -280,11 +266,11 @@ def _assemble(
     ``ext_input`` is ``(name, unit, description)`` of the FMU input; each
     output is ``(name, unit, description, kind, index)``.
     """
-    values = _checked(circuit)
+    values = {k: float(v) for k, v in checked_values(circuit).items()}
     lay = _Layout()
-    outs = [
-        Output(lay.add(n, causality="output", variability="continuous", initial="calculated", start=None,
-                       unit=u, description=d), k, i)
+    outs = [  # the bridge voltage changes only at the switching events
+        Output(lay.add(n, causality="output", variability="discrete" if k == OUT_INPUT else "continuous",
+                       initial="calculated", start=None, unit=u, description=d), k, i)
         for n, u, d, k, i in outputs
     ]
     input_var = None
@@ -447,7 +433,7 @@ def _c_array(ctype: str, name: str, items: Sequence[str], per_line: int = 6) -> 
 
 def _num(x: float) -> str:
     x = float(x)
-    if not np.isfinite(x):
+    if not math.isfinite(x):
         raise CircuitError(f"cannot write non-finite value {x!r} into C source")
     return repr(x)
 

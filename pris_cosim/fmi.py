@@ -52,7 +52,7 @@ _BASE_UNITS: dict[str, dict[str, int]] = {
 BUILD_DESCRIPTION = "buildDescription.xml"
 
 
-class FmuBuildError(RuntimeError):
+class FmuBuildError(OSError):
     """CMake or the C compiler failed; the message ends with the compiler's last lines."""
 
 
@@ -81,7 +81,8 @@ def _variable_xml(v: Variable, index_of: dict[tuple[str, int], int]) -> str:
         inner.append(f'start="{_fmt(v.start) if v.type == "Real" else int(v.start)}"')
     if v.derivative_of is not None:
         inner.append(f'derivative="{index_of[("Real", v.derivative_of)]}"')
-    return f"    <ScalarVariable {' '.join(attrs)}>\n      <{v.type}{''.join(' ' + a for a in inner)}/>\n    </ScalarVariable>"
+    body = f"<{v.type}{''.join(' ' + a for a in inner)}/>"
+    return f"    <ScalarVariable {' '.join(attrs)}>\n      {body}\n    </ScalarVariable>"
 
 
 def _unit_xml(units: Sequence[str]) -> str:

@@ -201,7 +201,7 @@ class ResponseModel:
         out = self._combine(z)
         return {k: v[0] if scalar else v for k, v in out.items()}
 
-    def evaluate_pointwise(
+    def evaluate_grid(
         self,
         frequency_hz: Sequence[float] | np.ndarray,
         overrides: Mapping[str, Numeric] | None = None,
@@ -214,31 +214,33 @@ class ResponseModel:
         frequency_hz : array_like, Hz
             ``F`` frequencies.
         overrides : mapping, optional
-            Scalar parameter or element values.
+            Parameter or element values: scalars or length-P arrays.
         per_frequency : mapping, optional
-            Element (or parameter) name to an array of ``F`` values, one per
-            frequency: a skin-effect resistance R(f), an inductance L(f).
-            Resistor values may be complex (a frequency-dependent impedance).
+            Element name to values over frequency, shape ``(F,)`` or ``(P, F)``:
+            a skin-effect resistance R(f), an inductance L(f). Resistor values
+            may be complex (a frequency-dependent impedance).
 
         Returns
         -------
         dict
-            Response name to complex array of shape ``(F,)``.
+            Response name to complex array, ``(F,)`` for scalar inputs, else ``(P, F)``.
         """
         f = np.asarray(frequency_hz, dtype=float)
-        over = dict(overrides or {})
+        values = self.values(overrides)
+        scalar = all(np.ndim(v) == 0 for v in values.values())
+        grid = {k: (np.asarray(v)[:, None] if np.ndim(v) == 1 else v) for k, v in values.items()}
         for name, v in (per_frequency or {}).items():
             arr = np.asarray(v)
-            if arr.shape != f.shape:
-                raise CircuitError(f"per-frequency values of {name!r}: expected shape {f.shape}, got {arr.shape}")
-            over[name] = arr
-        values = self.circuit.resolve(over, check=False)
-        self.circuit.check_values({k: np.abs(v) for k, v in values.items()})
-        self.circuit.check_passive({k: np.real(v) for k, v in values.items()}, strict=False)
-        values = {k: np.broadcast_to(np.asarray(v), f.shape) for k, v in values.items()}
-        z = self.mna.solve_pointwise(values, 2j * np.pi * f, self._out_index)[:, :, 0]
-        out = self._combine(z.T[None])
-        return {k: v[0] for k, v in out.items()}
+            if arr.shape[-1:] != f.shape:
+                raise CircuitError(f"per-frequency values of {name!r}: last axis must have {f.size} values, got {arr.shape}")
+            key = name.lower()
+            if key not in grid:
+                raise CircuitError(f"per-frequency values given for unknown element {name!r}")
+            grid[key] = arr
+            scalar = scalar and arr.ndim == 1
+        z = self.mna.solve_grid(grid, 2j * np.pi * f, self._out_index)[:, :, :, 0]  # (P, F, nodes)
+        out = self._combine(np.moveaxis(z, 2, 1))
+        return {k: v[0] if scalar else v for k, v in out.items()}
 
     def _fast(self, values: Mapping[str, Numeric], s: np.ndarray) -> np.ndarray:
         ss = self.mna.state_space(values).select([f"v({n})" for n in self._out_nodes])

@@ -311,46 +311,62 @@ class MNA:
         return out
 
 
-    def solve_pointwise(self, values: Mapping[str, Numeric], s: np.ndarray, outputs: Sequence[int]) -> np.ndarray:
-        """Node voltages per unit input where every parameter set has its own frequency.
-
-        This is how frequency-dependent element values are evaluated: flatten
-        (parameter set, frequency) pairs into one population of length Q and
-        give each its own complex frequency.
+    def solve_grid(self, values: Mapping[str, Numeric], s: np.ndarray, outputs: Sequence[int]) -> np.ndarray:
+        """Node voltages per unit input for element values that may vary with frequency.
 
         Parameters
         ----------
         values : mapping
-            Resolved element values, arrays of length Q (or scalars).
+            Resolved element values; each a scalar, an array of shape
+            ``(P, 1)`` (per parameter set) or ``(P, F)`` / ``(F,)`` (per
+            frequency: a skin-effect resistance, an inductance L(f)). Resistor
+            values may be complex (frequency-dependent impedances).
         s : numpy.ndarray
-            Complex frequencies, rad/s, shape ``(Q,)``.
+            Complex frequencies, rad/s, shape ``(F,)``.
         outputs : sequence of int
             Node indices wanted.
 
         Returns
         -------
         numpy.ndarray
-            Shape ``(Q, len(outputs), nu)``.
+            Shape ``(P, F, len(outputs), nu)``.
         """
-        G, Cn, L = self.matrices(values)
-        Q = s.size
-        if G.shape[0] not in (1, Q):
-            raise CircuitError(f"pointwise solve: {G.shape[0]} parameter sets for {Q} frequencies")
-        N, m, q = len(self.nodes), L.shape[1], self.AV.shape[1]
+        shape = np.broadcast_shapes((1, s.size), *[np.shape(v) for v in values.values()])
+        P, F = (1, shape[-1]) if len(shape) == 1 else shape
+        N, m, q = len(self.nodes), len(self.inductors), self.AV.shape[1]
         n = N + m + q
+        index = self._index
+        K = np.zeros((P, F, n, n), complex)
+        sv = s[None, :]
+
+        def stamp(a: str, b: str, y: np.ndarray) -> None:
+            ia, ib = index.get(a), index.get(b)
+            y = np.broadcast_to(y, (P, F))
+            if ia is not None:
+                K[:, :, ia, ia] += y
+            if ib is not None:
+                K[:, :, ib, ib] += y
+            if ia is not None and ib is not None:
+                K[:, :, ia, ib] -= y
+                K[:, :, ib, ia] -= y
+
+        for e in self.resistors:
+            stamp(*e.nodes, 1.0 / np.asarray(values[e.key]))
+        for e in self.capacitors:
+            stamp(*e.nodes, sv * np.asarray(values[e.key]))
+        magnetic = [e.key for e in self.inductors] + [k.key for k in self.circuit.of_kind("K")]
+        L = self.circuit.inductance_matrix({k: np.broadcast_to(np.real(values[k]), (P, F)) for k in magnetic})
+        K[:, :, :N, N : N + m] = self.AL
+        K[:, :, N : N + m, :N] = -self.AL.T
+        K[:, :, N : N + m, N : N + m] = sv[:, :, None, None] * L
+        K[:, :, :N, N + m :] = self.AV
+        K[:, :, N + m :, :N] = self.AV.T
         nI = self.BI.shape[1]
-        K = np.zeros((Q, n, n), complex)
-        K[:, :N, :N] = G + s[:, None, None] * Cn
-        K[:, :N, N : N + m] = self.AL
-        K[:, N : N + m, :N] = -self.AL.T
-        K[:, N : N + m, N : N + m] = s[:, None, None] * L
-        K[:, :N, N + m :] = self.AV
-        K[:, N + m :, :N] = self.AV.T
         rhs = np.zeros((n, nI + self.BV.shape[1]))
         rhs[:N, :nI] = self.BI
         rhs[N + m :, nI:] = self.BV
-        x = np.linalg.solve(K, np.broadcast_to(rhs, (Q,) + rhs.shape))
-        return x[:, list(outputs), :]
+        x = np.linalg.solve(K, np.broadcast_to(rhs, (P, F) + rhs.shape))
+        return x[:, :, list(outputs), :]
 
 
 def _real_or_complex(v: Numeric) -> np.ndarray:

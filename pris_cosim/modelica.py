@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 
 from .arrangement import BRIDGE, SENSE_INDUCTOR
@@ -111,6 +111,14 @@ def modelica_text(model: NetworkModel) -> str:
         comment = f' "{p.description}"' if p.description else ""
         decl.append(f"  parameter {kind} {pname[p.key]} = {rhs}{comment};")
 
+    def named(e: Element, kind: str) -> str:
+        """A tied value as its expression; a numeric one as a parameter named after the element."""
+        if isinstance(e.value, Expression):
+            return f"({value(e.value)})"
+        ident = _ident(e.name, taken)
+        decl.append(f"  parameter {kind} {ident} = {float(e.value)!r} \"value of element {e.name}\";")
+        return ident
+
     pins: dict[str, list[str]] = {}
 
     def attach(node: str, pin: str) -> None:
@@ -145,15 +153,16 @@ def modelica_text(model: NetworkModel) -> str:
             ind_current[e.key] = f"{name}.i"
             continue
         name = _ident("M_" + "_".join(e.name for e in group), taken)
+        text = {e.key: named(e, "SI.Inductance") for e in group}
         entries = []
         for i, a in enumerate(group):
             for b in group[i:]:
                 if a is b:
-                    entries.append(value(a.value))
+                    entries.append(text[a.key])
                 else:
                     k = couplings.get(frozenset((a.key, b.key)))
                     entries.append("0.0" if k is None else
-                                   f"{value(k.value)}*sqrt(({value(a.value)})*({value(b.value)}))")
+                                   f"{named(k, 'Real')}*sqrt({text[a.key]}*{text[b.key]})")
         decl.append(f"  Modelica.Electrical.Analog.Basic.M_Transformer {name}(N = {len(group)}, L = {{"
                     + ", ".join(entries) + "}) \"" + ", ".join(e.name for e in group) + "\";")
         for j, e in enumerate(group, start=1):
@@ -244,4 +253,4 @@ def write_modelica(model: NetworkModel, path: str | os.PathLike[str]) -> Path:
     return write_text_atomic(path, modelica_text(model))
 
 
-__all__: Sequence[str] = ["modelica_text", "write_modelica"]
+__all__ = ["modelica_text", "write_modelica"]

@@ -27,7 +27,7 @@ from .arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangemen
 from .circuit import GROUND, Circuit, Numeric
 from .errors import CircuitError
 from .mna import MNA, StateSpace
-from .signals import hbridge_waveform
+from .signals import hbridge_waveform, lfsr_prbs
 
 #: Samples per block of the blocked recurrence in :func:`simulate_pwc`.
 _BLOCK = 64
@@ -64,7 +64,9 @@ def _single(ss: StateSpace) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
     return ss.A[0], ss.B[0], ss.C[0], ss.D[0]
 
 
-def simulate_pwc(ss: StateSpace, u: np.ndarray, h: float, x0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def simulate_pwc(
+    ss: StateSpace, u: np.ndarray, h: float, x0: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Exact response to an input held constant over each sample interval.
 
     ``x[k+1] = Phi x[k] + Gamma u[k]``, ``y[k] = C x[k] + D u[k]``: sample k
@@ -134,11 +136,6 @@ def simulate_pwc(ss: StateSpace, u: np.ndarray, h: float, x0: np.ndarray | None 
     xs = xs.reshape(nblk * L, n)[:K]
     y = xs @ C.T + u @ D.T
     return xs, y
-
-
-def _arrangement_system(circuit: Circuit, values: Mapping[str, Numeric]) -> tuple[MNA, StateSpace]:
-    mna = MNA(circuit, voltage_inputs=[BRIDGE])
-    return mna, mna.state_space(values)
 
 
 def checked_values(circuit: Circuit, overrides: Mapping[str, Numeric] | None = None) -> dict[str, Numeric]:
@@ -219,23 +216,23 @@ def simulate_pris(
     circuit = pris_arrangement(dut, port, settings, shorts)
     port_node = circuit.ports[0]
     values = checked_values(circuit, overrides)
-    mna, ss = _arrangement_system(circuit, values)
-    A, B, C, D = _single(ss)
+    mna = MNA(circuit, voltage_inputs=[BRIDGE])
+    A, B, C, D = _single(mna.state_space(values))
     t, v_bridge = hbridge_waveform(settings.prbs_order, settings.fclk, fs, settings.vdc, periods)
     x = _pris_states(A, B[:, 0], settings, fs, v_bridge.size, x0)
-    y = x @ C.T + v_bridge[:, None] @ D.T
-    out = {"time_s": t, "v_bprbs": v_bridge, "v_in": y[:, mna.outputs.index(f"v({port_node})")],
-           "i_in": x[:, mna.states.index(f"i({SENSE_INDUCTOR})")]}
-    for p in circuit.probes:
-        out[f"v_{p}"] = y[:, mna.outputs.index(f"v({p})")]
+    nodes = [port_node] + list(circuit.probes)
+    rows = [mna.outputs.index(f"v({p})") for p in nodes]
+    y = x @ C[rows].T + v_bridge[:, None] @ D[rows].T
+    i_in = x[:, mna.states.index(f"i({SENSE_INDUCTOR})")]
+    out = {"time_s": t, "v_bprbs": v_bridge, "v_in": y[:, 0], "i_in": i_in}
+    for j, p in enumerate(circuit.probes, start=1):
+        out[f"v_{p}"] = y[:, j]
     return out
 
 
 def _pris_states(A: np.ndarray, b: np.ndarray, settings: SourceSettings, fs: float, K: int,
                  x0: np.ndarray | None) -> np.ndarray:
     """States at the K sample instants for the PRBS-switched bridge voltage (see :func:`simulate_pris`)."""
-    from .signals import lfsr_prbs
-
     n = A.shape[0]
     p, q = clock_ratio(settings.fclk, fs)
     unit = 1.0 / (p * float(fs))  # s; bit b spans [b q, (b + 1) q), sample k sits at k p
@@ -283,6 +280,9 @@ def _pris_states(A: np.ndarray, b: np.ndarray, settings: SourceSettings, fs: flo
         tail = (bi + 1) * q - (int(k_first[bi]) + c - 1) * p
         Phi, g = disc(tail)
         x = Phi @ last + g * u
+    if n_bits * max_count == K and np.all(counts == max_count):  # fs a multiple of fclk: one product
+        X = first @ P.reshape(max_count * n, n).T + level[:, None] * G.reshape(1, max_count * n)
+        return X.reshape(K, n)
     X = np.empty((K, n))
     for j in range(max_count):
         sel = counts > j
@@ -373,7 +373,6 @@ def pris_ngspice(
     from dataclasses import replace
 
     from . import ngspice
-    from .signals import lfsr_prbs
 
     circuit = pris_arrangement(dut, port, settings, shorts)
     checked_values(circuit)

@@ -103,8 +103,8 @@ class SkinEffect(Extension):
     def __post_init__(self) -> None:
         self.cause = "skin-effect"
         self.parameters = [
-            ExtraParameter("a", 1e-4, 1e4, (0.1, 1.0, 10.0), description="resistance rise at f0 (x R)"),
-            ExtraParameter("b", 0.1, 1.0, (0.5, 0.8), log=False, description="frequency exponent"),
+            ExtraParameter("a", 1e-4, 1e4, (1e-3, 0.3, 10.0), description="resistance rise at f0 (x R)"),
+            ExtraParameter("b", 0.1, 1.0, (0.5,), log=False, description="frequency exponent"),
         ]
 
     def _targets(self, circuit: Circuit) -> list[str]:
@@ -144,7 +144,8 @@ class CoreLoss(Extension):
     def starts(self, circuit: Circuit, values: Mapping[str, float], impedance_scale: float) -> list[dict[str, float]]:
         rc = core_loss_resistor(circuit)
         base = values[rc.lower()] if rc and rc != "Rcore" else 30 * impedance_scale
-        return [{"a": base * m, "b": self.fmid * g} for m in (1.0, 10.0) for g in (0.1, 1.0, 10.0)]
+        starts = [{"a": base * m, "b": self.fmid * g} for m in (1.0, 10.0) for g in (0.1, 1.0, 10.0)]
+        return starts + [{"a": 1e11, "b": self.fmid}]  # effectively no core loss: never worse than the baseline
 
     def _resistor(self, circuit: Circuit) -> str:
         return core_loss_resistor(circuit) or "Rcore"
@@ -163,7 +164,7 @@ class MagnetisingInductance(Extension):
 
     def __post_init__(self) -> None:
         self.cause = "magnetising-inductance"
-        self.parameters = [ExtraParameter("b", 0.0, 1.0, (0.05, 0.2), log=False, description="exponent of (2.5)")]
+        self.parameters = [ExtraParameter("b", 0.0, 1.0, (1e-4, 0.05, 0.2), log=False, description="exponent of (2.5)")]
 
     def per_frequency(self, circuit, values, f, p):
         factor = (f / self.f0) ** (-p["b"])

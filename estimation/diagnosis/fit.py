@@ -153,29 +153,52 @@ class FrequencyFit:
         return {p.name: float(np.exp(v) if p.log else v) for p, v in zip(self.extra, tail)}
 
     def predict(self, x: np.ndarray) -> dict[str, np.ndarray]:
-        """Model responses for a parameter vector (log-ratio base values, then extension parameters)."""
-        over = self.overrides(x)
+        """Model responses for one parameter vector (log-ratio base values, then extension parameters)."""
+        return {k: v[0] for k, v in self.predict_batch(np.atleast_2d(x)).items()}
+
+    def predict_batch(self, X: np.ndarray) -> dict[str, np.ndarray]:
+        """Model responses for a population of parameter vectors, shape ``(P, F)`` per response."""
+        P, F = X.shape[0], self.f.size
+        over = {n: self.start[i] * np.exp(X[:, i]) for i, n in enumerate(self.free)}
         out: dict[str, np.ndarray] = {}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NonPassiveWarning)
             if self.extension is not None and self.extra:
+                tail = X[:, len(self.free):]
+                extra = {p.name: (np.exp(tail[:, j]) if p.log else tail[:, j])[:, None] for j, p in enumerate(self.extra)}
                 values = self.circuit.resolve(over, check=False)
-                pf = self.extension.per_frequency(self.circuit, values, self.f, self.extra_values(x))
+                values = {k: (np.asarray(v)[:, None] if np.ndim(v) else v) for k, v in values.items()}
+                pf = self.extension.per_frequency(self.circuit, values, self.f[None, :], extra)
+                pf = {k: np.broadcast_to(v, (P, F)) for k, v in pf.items()}
                 for m in self.models:
-                    out.update(m.evaluate_pointwise(self.f, over, pf))
+                    out.update(m.evaluate_grid(self.f, over, pf))
             else:
                 for m in self.models:
-                    out.update(m.evaluate(self.f, over))
+                    res = m.evaluate(self.f, over)
+                    out.update({k: np.broadcast_to(v, (P, F)) for k, v in res.items()})
         return out
 
     def errors(self, predicted: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         return {n: np.log(predicted[n] / self.measured[n]) for n in self.measured}
 
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        e = self.errors(self.predict(x))
-        parts = [np.concatenate([v.real, v.imag]) / np.sqrt(2 * v.size) for v in e.values()]
-        r = np.concatenate(parts)
+    def residuals_batch(self, X: np.ndarray) -> np.ndarray:
+        """Weighted residual vectors, shape ``(P, n_residuals)``."""
+        pred = self.predict_batch(X)
+        parts = []
+        for n, meas in self.measured.items():
+            e = np.log(pred[n] / meas)
+            parts.append(np.concatenate([e.real, e.imag], axis=1) / np.sqrt(2 * meas.size))
+        r = np.concatenate(parts, axis=1)
         return np.where(np.isfinite(r), r, 1e3)
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        return self.residuals_batch(np.atleast_2d(x))[0]
+
+    def jacobian(self, x: np.ndarray, step: float = 1e-6) -> np.ndarray:
+        """Forward-difference Jacobian, all perturbed vectors evaluated as one batch."""
+        X = np.vstack([x, x + step * np.eye(x.size)])
+        R = self.residuals_batch(X)
+        return (R[1:] - R[0]).T / step
 
     # ------------------------------------------------------------------ fitting
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -183,7 +206,7 @@ class FrequencyFit:
         hi = [np.log(100.0)] * len(self.free) + [np.log(p.upper) if p.log else p.upper for p in self.extra]
         return np.array(lo), np.array(hi)
 
-    def fit(self, extra_starts: Sequence[Mapping[str, float]] | None = None, max_nfev: int = 200,
+    def fit(self, extra_starts: Sequence[Mapping[str, float]] | None = None, max_nfev: int = 100,
             cause: str | None = None) -> FitResult:
         """Fit from each start (extension parameter guesses); keep the best."""
         t0 = time.perf_counter()
@@ -198,8 +221,8 @@ class FrequencyFit:
             x0 = np.concatenate([np.zeros(len(self.free)),
                                  [np.log(s[p.name]) if p.log else s[p.name] for p in self.extra]])
             x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
-            sol = least_squares(self.residuals, x0, bounds=(lo, hi), x_scale="jac", max_nfev=max_nfev,
-                                xtol=1e-10, ftol=1e-10)
+            sol = least_squares(self.residuals, x0, jac=self.jacobian, bounds=(lo, hi), x_scale="jac",
+                                max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
             nfev += sol.nfev
             if best is None or sol.cost < best.cost:
                 best = sol

@@ -73,6 +73,7 @@ static void logmsg(prc_inst *c, fmi2Status status, const char *category, const c
 static fmi2Status fail(prc_inst *c, const char *fn, const char *fmt, ...) {
     char buf[MSG_LEN];
     va_list ap;
+    if (!c) return fmi2Error;
     va_start(ap, fmt);
     vsnprintf(buf, sizeof buf, fmt, ap);
     va_end(ap);
@@ -366,7 +367,8 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
 fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     prc_inst *c = (prc_inst *)comp;
     fmi2Status s;
-    if (!c || c->state != ST_INIT) return c ? fail(c, "fmi2ExitInitializationMode", "not in initialization mode") : fmi2Error;
+    if (!c) return fmi2Error;
+    if (c->state != ST_INIT) return fail(c, "fmi2ExitInitializationMode", "not in initialization mode");
     s = ensure_built(c, "fmi2ExitInitializationMode");
     if (s != fmi2OK) return s;
     reset_prbs(c);
@@ -444,12 +446,14 @@ fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
 
 fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
     (void)value;
-    return nvr == 0 ? fmi2OK : fail((prc_inst *)comp, "fmi2GetBoolean", "the FMU has no Boolean variables (vr %u)", vr[0]);
+    if (nvr == 0) return fmi2OK;
+    return fail((prc_inst *)comp, "fmi2GetBoolean", "the FMU has no Boolean variables (vr %u)", vr[0]);
 }
 
 fmi2Status fmi2GetString(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
     (void)value;
-    return nvr == 0 ? fmi2OK : fail((prc_inst *)comp, "fmi2GetString", "the FMU has no String variables (vr %u)", vr[0]);
+    if (nvr == 0) return fmi2OK;
+    return fail((prc_inst *)comp, "fmi2GetString", "the FMU has no String variables (vr %u)", vr[0]);
 }
 
 static fmi2Status check_settable(prc_inst *c, const char *fn, unsigned char how, const char *name) {
@@ -495,12 +499,14 @@ fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
 
 fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
     (void)value;
-    return nvr == 0 ? fmi2OK : fail((prc_inst *)comp, "fmi2SetBoolean", "the FMU has no Boolean variables (vr %u)", vr[0]);
+    if (nvr == 0) return fmi2OK;
+    return fail((prc_inst *)comp, "fmi2SetBoolean", "the FMU has no Boolean variables (vr %u)", vr[0]);
 }
 
 fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
     (void)value;
-    return nvr == 0 ? fmi2OK : fail((prc_inst *)comp, "fmi2SetString", "the FMU has no String variables (vr %u)", vr[0]);
+    if (nvr == 0) return fmi2OK;
+    return fail((prc_inst *)comp, "fmi2SetString", "the FMU has no String variables (vr %u)", vr[0]);
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
