@@ -189,8 +189,13 @@ class MissingSection(Extension):
         self.cause = "missing-section"
         self.parameters = []
 
-    def candidates(self, values: Mapping[str, float]) -> list[tuple[Circuit, dict[str, float]]]:
-        """Starting circuits: each existing section split in two (series halves)."""
+    def candidates(self, values: Mapping[str, float]) -> list[tuple[Circuit, set[str]]]:
+        """Starting circuits with one more section, and the names of the new section's elements.
+
+        Starts: each existing section split into two halves, and a typical
+        section appended at the neutral end over a grid of L and C. The second
+        item of each pair lists the new elements, fitted alone first.
+        """
         fam = self.model.family if self.model else ()
         out: list[tuple[Circuit, dict[str, float]]] = []
         if fam and fam[0] == "lumped":
@@ -198,26 +203,31 @@ class MissingSection(Extension):
             for share in (0.5, 0.8, 0.95):
                 m = cascade(2, R=[r * share, r * (1 - share)], L=[l * share, l * (1 - share)],
                             C=[c / share, c / (1 - share)], Cg=[c * 1e-3, c * 1e-3], k=0.0)
-                out.append((m.circuit, {}))
+                out.append((m.circuit, {"R2", "L2", "C2"}))
         elif fam and fam[0] == "cascade":
             n, neutral = fam[1], fam[2]
             R = [values[f"r{i}"] for i in range(1, n + 1)]
             L = [values[f"l{i}"] for i in range(1, n + 1)]
             C = [values[f"c{i}"] for i in range(1, n + 1)]
-            Cg = [values[f"cg{i}"] for i in range(1, (n + 2 if neutral == "open" else n + 1))]
-            for j in range(n):
-                R2 = R[:j] + [R[j] / 2, R[j] / 2] + R[j + 1:]
-                L2 = L[:j] + [L[j] / 2, L[j] / 2] + L[j + 1:]
-                C2 = C[:j] + [2 * C[j], 2 * C[j]] + C[j + 1:]
-                Cg2 = Cg[:j + 1] + [Cg[j]] + Cg[j + 1:]
-                Cg2 = Cg2[: (n + 2 if neutral == "open" else n + 1)]
-                k = 0.87 if n > 1 else 0.5
-                out.append((cascade(n + 1, R=R2, L=L2, C=C2, Cg=Cg2, k=k, neutral=neutral).circuit, {}))
+            n_cg = n + 1 if neutral == "open" else n
+            Cg = [values[f"cg{i}"] for i in range(1, n_cg + 1)]
+            rho = _nearest_neighbour_coupling(values, n)
+            starts = []
+            for j in range(n):  # split section j into two halves
+                starts.append((R[:j] + [R[j] / 2] * 2 + R[j + 1:], L[:j] + [L[j] / 2] * 2 + L[j + 1:],
+                               C[:j] + [2 * C[j]] * 2 + C[j + 1:], Cg[:j + 1] + [Cg[j]] + Cg[j + 1:]))
+            for ls in (0.3, 1.0, 3.0):  # append a typical section at the neutral end
+                for cs in (0.3, 1.0, 3.0):
+                    starts.append((R + [float(np.mean(R))], L + [float(np.mean(L)) * ls], C + [float(np.mean(C)) * cs],
+                                   Cg + [float(np.mean(Cg))]))
+            new = {f"R{n + 1}", f"L{n + 1}", f"C{n + 1}", f"Cg{n + 1}"}
+            for R2, L2, C2, Cg2 in starts:
+                out.append((cascade(n + 1, R=R2, L=L2, C=C2, Cg=Cg2[: n_cg + 1], k=rho, neutral=neutral).circuit, new))
         elif fam and fam[0] == "two-winding":
             out += self._two_winding(values)
         return out
 
-    def _two_winding(self, values: Mapping[str, float]) -> list[tuple[Circuit, dict[str, float]]]:
+    def _two_winding(self, values: Mapping[str, float]) -> list[tuple[Circuit, set[str]]]:
         _, N, cab2, tied = self.model.family
         v = {k: float(x) for k, x in values.items()}
         lb = [v[f"lb{i}"] for i in range(1, N + 1)]
@@ -243,7 +253,15 @@ class MissingSection(Extension):
         new["Kc"] = core
         if cab2:
             new["Cab2"] = v.get("cab2", 1e-12)
-        return [(two_winding(M, new, cab2=cab2, tied_core_coupling=tied).circuit, {})]
+        added = {f"Lb{i}" for i in (1, 2, M - 1, M)} | {f"Cb{i}" for i in (1, 2, M - 1, M)}
+        return [(two_winding(M, new, cab2=cab2, tied_core_coupling=tied).circuit, added)]
+
+
+def _nearest_neighbour_coupling(values: Mapping[str, float], n: int) -> float:
+    """Mean coupling between adjacent sections of a cascade (its ``rho``), 0.5 when uncoupled."""
+    ks = [values.get(f"k{i}{i + 1}", values.get(f"k{i}_{i + 1}")) for i in range(1, n)]
+    ks = [k for k in ks if k is not None]
+    return float(np.mean(ks)) if ks else 0.5
 
 
 def frequency_extensions(model: Model | None, fmin: float, fmax: float) -> list[Extension]:

@@ -24,6 +24,7 @@ from pris_cosim.frf import Response
 from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
 
 from .catalogue import CoreLoss, Extension, MissingSection, frequency_extensions
+from ..resonances import count_parallel, find_resonances
 from .evidence import band_table, localise, resonance_comparison
 from .fit import DiagnosisError, FitResult, FrequencyFit
 
@@ -175,8 +176,11 @@ def diagnose_frequency(
         results.append(res)
         _log(f"{ext.cause}: cost {res.cost:.4g}, gain {1 - res.cost / baseline.cost:.3f}, "
              f"dBIC {baseline.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
-    # ---- selection
-    best = min(results, key=lambda r: r.bic) if results else None
+    # ---- selection: lowest BIC among the fits that reproduce the measured resonance count
+    target_count = _parallel_count(f, data)
+    matching = [r for r in results if _parallel_count(f, r.predicted) == target_count]
+    pool = matching if matching and _parallel_count(f, baseline.predicted) != target_count else results
+    best = min(pool, key=lambda r: r.bic) if pool else None
     chosen = None
     if best is not None and baseline.bic - best.bic >= min_delta_bic and 1 - best.cost / baseline.cost >= min_gain:
         chosen = best
@@ -189,7 +193,9 @@ def diagnose_frequency(
         "bands_after": band_table(f, chosen.errors) if chosen else [],
         "gain_per_response": ({n: 1 - float(np.mean(np.abs(chosen.errors[n]) ** 2) / np.mean(np.abs(baseline.errors[n]) ** 2))
                                for n in data} if chosen else {}),
-        "criterion": f"lowest BIC; named only if dBIC >= {min_delta_bic} and gain >= {min_gain}",
+        "criterion": (f"lowest BIC among the fits that reproduce the measured number of parallel resonances "
+                      f"({target_count}) when the baseline does not; named only if dBIC >= {min_delta_bic} "
+                      f"and gain >= {min_gain}"),
     }
     if chosen is not None:
         diag.realisation = _realise(chosen, fitted_model, f)
@@ -198,19 +204,29 @@ def diagnose_frequency(
     return diag
 
 
+def _parallel_count(f: np.ndarray, responses: Mapping[str, np.ndarray]) -> int:
+    """Parallel resonances summed over the impedance responses."""
+    return sum(count_parallel(find_resonances(f, v)) for k, v in responses.items() if k.startswith("Z"))
+
+
 def _fit_missing_section(ext: MissingSection, values: Mapping[str, float], f: np.ndarray,
                          data: Mapping[str, np.ndarray], fixed: tuple[str, ...]) -> FitResult | None:
     best = None
     family = ext.model.family if ext.model else ()
-    for circuit, _ in ext.candidates(values):
+    staged = []
+    for circuit, _added in ext.candidates(values):
         if family and family[0] == "two-winding":
             configs = list(ext.model.configurations.values())
         else:
             configs = [Configuration("default", "n1", (), (Response("Zin"),))]
-        try:
-            res = FrequencyFit(circuit, configs, f, data, fixed).fit(cause="missing-section")
+        try:  # a short fit from every start, then the best two refined
+            first = FrequencyFit(circuit, configs, f, data, fixed).fit(max_nfev=60, cause="missing-section")
         except DiagnosisError:
             continue
+        staged.append((first.cost, circuit.with_values(first.values), configs))
+    staged.sort(key=lambda t: t[0])
+    for _, circuit, configs in staged[:2]:
+        res = FrequencyFit(circuit, configs, f, data, fixed).fit(max_nfev=300, cause="missing-section")
         if best is None or res.cost < best.cost:
             best = res
     return best
