@@ -1,0 +1,86 @@
+"""``pris-cosim diagnose``: registered with the main command line through an entry point."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``diagnose`` sub-command."""
+    p = subparsers.add_parser("diagnose", help="name what the simulation gets wrong in measured data, and the gain of fixing it")
+    p.add_argument("--measured", required=True, metavar="FILE", help="measured responses (CSV, Touchstone, .mat, real formats) or waveforms CSV")
+    p.add_argument("--segment", metavar="NAME", help="segment of a multi-segment file (e.g. short, open)")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--netlist", metavar="FILE", help="baseline netlist (with --port)")
+    src.add_argument("--model", metavar="NAME", help="baseline built-in model")
+    p.add_argument("--port", metavar="NODE", help="driven node of the baseline netlist")
+    p.add_argument("--rpris", type=float, help="nominal source resistance, Ohm (waveform data)")
+    p.add_argument("--lpris", type=float, help="nominal source inductance, H (waveform data)")
+    p.add_argument("--cpris", type=float, help="nominal source capacitance, F (waveform data)")
+    p.add_argument("--rload", type=float, help="load resistance if known, Ohm (waveform data)")
+    p.add_argument("--report", metavar="DIR", help="write report.md with plots into DIR")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_diagnose)
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    from pris_cosim.cli import _emit
+    from pris_cosim.measured import Waveforms, load_measured
+
+    from .fit import DiagnosisError
+
+    data = load_measured(args.measured, segment=args.segment)
+    if isinstance(data, Waveforms):
+        if None in (args.rpris, args.lpris, args.cpris):
+            raise DiagnosisError("waveform data needs the nominal source values --rpris --lpris --cpris")
+        from .waveform import diagnose_waveforms, write_report as write_waveform_report
+
+        diag = diagnose_waveforms(data, args.rpris, args.lpris, args.cpris, r_load=args.rload, progress=True)
+        if args.report:
+            write_waveform_report(diag, args.report)
+    else:
+        from pris_cosim.netlist import read_netlist
+        from pris_cosim.models import get_model
+
+        from .diagnose import diagnose_frequency
+        from .report import write_report
+
+        model = get_model(args.model) if args.model else None
+        circuit = read_netlist(args.netlist) if args.netlist else None
+        if circuit is not None and not args.port:
+            raise DiagnosisError("a netlist baseline needs --port")
+        diag = diagnose_frequency(data.frequency_hz, data.responses, model=model, circuit=circuit, port=args.port)
+        if args.report:
+            write_report(diag, args.report, source=Path(args.measured).name + (f" [{args.segment}]" if args.segment else ""))
+    out = diag.as_json()
+    if isinstance(out.get("realisation"), dict):
+        out["realisation"] = {k: v for k, v in out["realisation"].items() if k != "circuit"}
+    if args.report:
+        out["report"] = str(Path(args.report) / "report.md")
+    if args.json:
+        _emit(_plain(out))
+    else:
+        print(f"cause: {out['cause']}  gain: {out['gain']:.3f}")
+        for c in out["candidates"]:
+            print(f"  {c['cause']:<24} cost {c['cost']:.4g}  gain {c['gain']:.3f}")
+        if args.report:
+            print(f"report: {out['report']}", file=sys.stderr)
+    return 0
+
+
+def _plain(obj: Any) -> Any:
+    """JSON-safe copy: numpy scalars to floats, tuples to lists."""
+    import numpy as np
+
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
