@@ -243,7 +243,10 @@ class ResponseModel:
         return {k: v[0] if scalar else v for k, v in out.items()}
 
     def _fast(self, values: Mapping[str, Numeric], s: np.ndarray) -> np.ndarray:
-        ss = self.mna.state_space(values).select([f"v({n})" for n in self._out_nodes])
+        try:
+            ss = self.mna.state_space(values).select([f"v({n})" for n in self._out_nodes])
+        except CircuitError:  # improper (e.g. Z = R + sL driven by a current): no state space, solve densely
+            return self.mna.solve_dense(values, s, self._out_index)[:, :, 0, :]
         pr, cond = poles_residues(ss)
         z = pr.evaluate(s)
         bad = np.flatnonzero(~(cond < 1e10))

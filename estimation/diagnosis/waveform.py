@@ -1,0 +1,1037 @@
+"""Waveform diagnosis: measured PRIS source waveforms on a resistive load against the simulated source.
+
+The measured record holds the commanded H-bridge voltage ``v_bprbs`` (held
+from sample k to k+1), the load voltage ``v_in`` and the source current
+``i_in`` (thesis 3.3: the source check on a 15 Ohm load). The baseline is
+the PRIS source with its nominal ``R_pris``, ``L_pris``, ``C_pris`` driving
+a resistor ``R_load`` (fitted, its exact value being unknown), simulated
+exactly for the piecewise-constant ``v_bprbs`` (zero-order hold).
+
+Cost
+    ``cost = sum_s mean_k (y_s,model[k] - y_s,measured[k])^2 / var(y_s,measured)``
+    over the signals ``s`` in (``v_in``, ``i_in``): the normalised mean
+    squared error of each signal, summed (dimensionless; 0 = perfect, about
+    1 per signal for a model that explains nothing).
+
+Model extensions (each refitted together with ``R_load``)
+    ``series-resistance``  one extra resistance in series with ``R_pris``
+                           (tracks, cables, switch on-resistance), Ohm.
+    ``component-drift``    scale factors of ``L_pris`` and ``C_pris``.
+    ``switch-ringing``     switch parasitics of thesis 5.1.3: ``L_sw`` in
+                           series with the bridge, ``C_sw`` across its output
+                           (plus a known RC snubber when one is given),
+                           fitted as the observed ringing frequency and the
+                           characteristic impedance ``sqrt(L_sw / C_sw)``;
+                           the starting frequencies come from the spectrum of
+                           the baseline residual and a scan of the cost.
+
+The initial state of the source is unknown in a real record (the scope
+starts anywhere); for every parameter set it is eliminated by a linear
+least-squares fit (variable projection) and counted as fitted parameters.
+
+Selection (as :func:`estimation.diagnosis.diagnose.diagnose_frequency`):
+the extension with the lowest ``BIC = N ln(RSS/N) + k ln N`` (``N`` = 2 x
+samples, ``RSS`` = the sum of the normalised squared residuals) is named
+only if it beats the baseline's BIC by at least 10 and removes at least
+20 % of the baseline cost; otherwise the cause is ``none``.
+
+Simulation: each parameter set's state matrix is diagonalised, the exact ZOH
+recurrence of every mode ``z[k+1] = exp(mu h) z[k] + g u[k]`` is run by a
+first-order IIR filter, and the free responses (for the initial state) are
+the powers ``exp(mu h k)``; parameter sets are batched (the finite-difference
+Jacobian is one batch). A defective or ill-conditioned eigenbasis falls back
+to :func:`pris_cosim.timedomain.simulate_pwc`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import lfilter
+
+from pris_cosim.arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangement
+from pris_cosim.circuit import Circuit
+from pris_cosim.measured import Waveforms, read_waveform_csv
+from pris_cosim.mna import MNA, StateSpace
+from pris_cosim.timedomain import simulate_pwc
+
+from .fit import DiagnosisError
+
+__all__ = [
+    "WAVEFORM_CAUSES",
+    "WaveformFit",
+    "WaveformDiagnosis",
+    "diagnose_waveforms",
+    "load_waveforms",
+    "write_report",
+]
+
+#: Causes the waveform diagnosis can name (besides ``none``).
+WAVEFORM_CAUSES = ("series-resistance", "component-drift", "switch-ringing")
+
+SIGNALS = ("v_in", "i_in")
+UNITS = {"v_in": "V", "i_in": "A"}
+
+#: Fewest samples accepted.
+MIN_SAMPLES = 64
+#: A baseline whose normalised MSE exceeds this for either signal "does not fit at all".
+MAX_BASELINE_NMSE = 0.25
+#: Largest parameter batch simulated at once (memory: batch x samples x 2 x states doubles).
+_CHUNK = 8
+#: Finite-difference step of the Jacobian, in log-parameter units.
+_FD_STEP = 1e-7
+#: Lowest ringing frequency searched, in PRBS clock frequencies.
+_RING_MIN_FCLK = 20.0
+#: Highest ringing frequency searched, as a fraction of the sampling rate.
+_RING_MAX_FS = 0.45
+_LOAD = "load"
+
+
+def _log(msg: str, progress: bool) -> None:
+    if progress:
+        print(f"diagnose: {msg}", file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------------------
+# Circuit and exact batched simulation
+# ---------------------------------------------------------------------------
+
+
+class _Structure:
+    """The compiled source + resistive-load circuit, with or without switch parasitics."""
+
+    def __init__(self, rpris: float, lpris: float, cpris: float, ringing: bool,
+                 rsnub: float = 0.0, csnub: float = 0.0):
+        dut = Circuit(title="resistive load")
+        dut.add("Rload", _LOAD, "0", 15.0)
+        snub = ringing and rsnub > 0 and csnub > 0
+        settings = SourceSettings(vdc=1.0, prbs_order=4, fclk=1.0, rpris=rpris, lpris=lpris, cpris=cpris,
+                                  lsw=1e-6 if ringing else 0.0, csw=1e-9 if ringing else 0.0,
+                                  rsnub=rsnub if snub else 0.0, csnub=csnub if snub else 0.0)
+        self.circuit = pris_arrangement(dut, _LOAD, settings)
+        self.mna = MNA(self.circuit, voltage_inputs=[BRIDGE])
+        self.base = {k: float(v) for k, v in self.circuit.resolve(check=False).items()}
+        self.out_v = self.mna.outputs.index(f"v({_LOAD})")
+        self.i_state = self.mna.states.index(f"i({SENSE_INDUCTOR})")
+        self.n = self.mna.n_states
+
+    def state_space(self, overrides: Mapping[str, np.ndarray], P: int) -> StateSpace:
+        values = {k: np.full(P, v) for k, v in self.base.items()}
+        for k, v in overrides.items():
+            values[k.lower()] = np.broadcast_to(np.asarray(v, float), (P,)).copy()
+        ss = self.mna.state_space(values)
+        Cy = np.zeros((P, 2, self.n))
+        Dy = np.zeros((P, 2, 1))
+        Cy[:, 0] = ss.C[:, self.out_v]
+        Dy[:, 0] = ss.D[:, self.out_v]
+        Cy[:, 1, self.i_state] = 1.0
+        return StateSpace(ss.A, ss.B, Cy, Dy, list(ss.states), list(ss.inputs), list(SIGNALS))
+
+
+class _Input:
+    """A piecewise-constant input split into runs of constant value (for the closed-form modal response)."""
+
+    def __init__(self, u: np.ndarray):
+        self.u = np.asarray(u, float)
+        K = self.u.size
+        self.starts = np.concatenate([[0], np.flatnonzero(np.diff(self.u) != 0) + 1])
+        self.lengths = np.diff(np.concatenate([self.starts, [K]]))
+        self.levels = self.u[self.starts]
+        self.seg = np.repeat(np.arange(self.starts.size), self.lengths)
+        self.offset = np.arange(K) - self.starts[self.seg]
+        self.max_len = int(self.lengths.max())
+        self.K = K
+
+
+#: Above this many runs of constant input the modal response is filtered sample by sample instead.
+_MAX_RUNS = 4000
+
+
+def _simulate_one(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, inp: _Input,
+                  h: float, want_free: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """Forced outputs (K, 2) from zero state and a basis (K, 2, n) of the free responses, exact ZOH.
+
+    Modal form: ``A = V diag(mu) V^-1``; over a run of constant input ``U``
+    each mode follows ``z[k0 + m] = z_ss + exp(mu h m) (z[k0] - z_ss)`` with
+    ``z_ss = -b U / mu`` exactly, so only the run boundaries are stepped.
+    Only one mode of each complex-conjugate pair is kept (the outputs are
+    twice its real part). The free-response basis spans the responses to
+    every initial state: one real column per real mode, two per complex pair.
+    """
+    n = A.shape[0]
+    K = inp.K
+    u = inp.u
+    mu, V = np.linalg.eig(A)
+    ok = (np.all(np.isfinite(mu)) and np.all(mu.real < 0) and np.linalg.cond(V) < 1e8
+          and np.all(np.abs(mu) * h > 1e-14))
+    if ok:
+        W = np.linalg.inv(V)
+        keep = np.flatnonzero(mu.imag >= 0)
+        if keep.size + np.count_nonzero(mu.imag > 0) != n:  # unpaired complex modes: should not happen
+            ok = False
+    if ok:
+        mu_k = mu[keep]
+        fac = np.where(mu_k.imag > 0, 2.0, 1.0)
+        bt = (W @ B[:, 0])[keep]
+        CV = (C @ V)[:, keep] * fac[None, :]  # (2, m)
+        z_ss = -np.outer(inp.levels, bt / mu_k)  # (runs, m)
+        if inp.starts.size <= _MAX_RUNS:
+            pw = np.exp(np.outer(np.arange(inp.max_len + 1) * h, mu_k))  # (max_len + 1, m)
+            starts = np.empty_like(z_ss)
+            z = np.zeros(mu_k.size, complex)
+            decay = pw[inp.lengths]  # (runs, m)
+            for j in range(inp.starts.size):
+                starts[j] = z
+                z = z_ss[j] + decay[j] * (z - z_ss[j])
+            zk = z_ss[inp.seg] + pw[inp.offset] * (starts - z_ss)[inp.seg]  # (K, m)
+        else:
+            lam = np.exp(mu_k * h)
+            g = np.expm1(mu_k * h) / mu_k * bt
+            zk = np.empty((K, mu_k.size), complex)
+            for i in range(mu_k.size):
+                zk[:, i] = lfilter([0.0, g[i]], [1.0, -lam[i]], u)
+        # Re(zk @ CV.T) as a real product: interleaved (re, im) columns against (Re CV, -Im CV)
+        R = np.empty((2 * mu_k.size, 2))
+        R[0::2] = CV.real.T
+        R[1::2] = -CV.imag.T
+        y = np.ascontiguousarray(zk).view(np.float64) @ R + u[:, None] * D[:, 0][None, :]
+        free = None
+        if want_free:
+            if inp.starts.size <= _MAX_RUNS:
+                lamk = np.exp(mu_k * h * inp.starts[:, None])[inp.seg] * pw[inp.offset]  # exp(mu h k)
+            else:
+                lamk = np.exp(np.outer(np.arange(K) * h, mu_k))
+            cols = []
+            for i in range(mu_k.size):
+                q = lamk[:, i, None] * CV[None, :, i]  # (K, 2)
+                cols.append(q.real)
+                if mu_k[i].imag > 0:
+                    cols.append(q.imag)
+            free = np.stack(cols, axis=2)
+        return y, free
+    ss = StateSpace(A[None], B[None], C[None], D[None], [], [], list(SIGNALS))
+    _, y = simulate_pwc(ss, u, h)
+    free = None
+    if want_free:
+        free = np.empty((K, 2, n))
+        zero = np.zeros(K)
+        for j in range(n):
+            e = np.zeros(n)
+            e[j] = 1.0
+            free[:, :, j] = simulate_pwc(ss, zero, h, x0=e)[1]
+    return y, free
+
+
+# ---------------------------------------------------------------------------
+# Candidates
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class _Candidate:
+    """A model: baseline (cause ``none``) or baseline plus one extension."""
+
+    cause: str
+    names: tuple[str, ...]  # internal (log) parameter names of the extension
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    ringing: bool = False
+
+    def overrides(self, th: np.ndarray, nominal: Mapping[str, float], snubber: tuple[float, float]) -> dict[str, np.ndarray]:
+        """Element values (P,) for extension parameters ``th`` (P, q)."""
+        R, L, C = nominal["rpris"], nominal["lpris"], nominal["cpris"]
+        if self.cause == "series-resistance":
+            return {"rpris": R * np.exp(th[:, 0])}
+        if self.cause == "component-drift":
+            return {"lpris": L * np.exp(th[:, 0]), "cpris": C * np.exp(th[:, 1])}
+        if self.cause == "switch-ringing":
+            lsw, csw = _lc_from_ringing(np.exp(th[:, 0]), np.exp(th[:, 1]), snubber[1], L)
+            return {"lsw": lsw, "csw": csw}
+        return {}
+
+    def extra(self, th: np.ndarray, nominal: Mapping[str, float], snubber: tuple[float, float]) -> dict[str, float]:
+        """Fitted extension parameters, reported with their units in the names."""
+        th = np.asarray(th, float)
+        R, L, C = nominal["rpris"], nominal["lpris"], nominal["cpris"]
+        if self.cause == "series-resistance":
+            r = R * math.exp(th[0])
+            return {"r_series_ohm": r - R, "r_total_ohm": r, "r_series_percent_of_nominal": 100 * (r / R - 1)}
+        if self.cause == "component-drift":
+            kl, kc = math.exp(th[0]), math.exp(th[1])
+            return {"l_scale": kl, "c_scale": kc, "lpris_h": L * kl, "cpris_f": C * kc,
+                    "l_drift_percent": 100 * (kl - 1), "c_drift_percent": 100 * (kc - 1)}
+        if self.cause == "switch-ringing":
+            f_obs, z0 = math.exp(th[0]), math.exp(th[1])
+            lsw, csw = (float(a[0]) for a in _lc_from_ringing(np.array([f_obs]), np.array([z0]), snubber[1], L))
+            out = {"lsw_h": lsw, "csw_f": csw, "z0_ohm": z0,
+                   "f_ring_hz": 1 / (2 * math.pi * math.sqrt(lsw * csw)), "f_ring_observed_hz": f_obs}
+            if snubber[1] > 0:
+                out.update({"f_ring_snubbed_hz": 1 / (2 * math.pi * math.sqrt(lsw * (csw + snubber[1]))),
+                            "rsnub_ohm": snubber[0], "csnub_f": snubber[1]})
+            return out
+        return {}
+
+
+def _lc_from_ringing(f_obs: np.ndarray, z0: np.ndarray, csnub: float, lpris: float) -> tuple[np.ndarray, np.ndarray]:
+    """``L_sw``, ``C_sw`` from the observed ringing frequency and ``z0 = sqrt(L_sw / C_sw)``.
+
+    The ringing seen in ``v_in``, ``i_in`` is that of ``C_sw`` (plus the snubber
+    capacitance) against ``L_sw`` in parallel with ``L_pris`` (the rest of the
+    source is negligible at MHz): ``f_obs = 1 / (2 pi sqrt(L_e (C_sw + C_snub)))``
+    with ``L_e = L_sw L_pris / (L_sw + L_pris)`` (thesis (5.1), (5.2) with the
+    load of the source), solved for ``C_sw`` with ``L_sw = z0^2 C_sw``.
+    """
+    w2 = (2 * np.pi * f_obs) ** 2
+    z2 = z0 ** 2
+    a = z2 * lpris
+    b = z2 * (lpris * csnub - 1.0 / w2)
+    c = -lpris / w2
+    csw = 2 * (-c) / (b + np.sqrt(b * b - 4 * a * c))  # the positive root, cancellation-free
+    return z2 * csw, csw
+
+
+def _candidates(fmin_ring: float, fmax_ring: float) -> list[_Candidate]:
+    out = [
+        _Candidate("series-resistance", ("ln_r_scale",), (math.log(0.5),), (math.log(20.0),)),
+        _Candidate("component-drift", ("ln_l_scale", "ln_c_scale"), (math.log(0.1),) * 2, (math.log(10.0),) * 2),
+    ]
+    if fmax_ring > 1.2 * fmin_ring:
+        out.append(_Candidate("switch-ringing", ("ln_f_ring", "ln_z0"), (math.log(fmin_ring), math.log(1.0)),
+                              (math.log(fmax_ring), math.log(1e4)), ringing=True))
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Fitting
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class WaveformFit:
+    """Outcome of one fit.
+
+    Attributes
+    ----------
+    cause : str
+        ``none`` for the baseline, else the extension's cause.
+    values : dict
+        Fitted source and load values in SI units (``r_load``, ``rpris``,
+        ``lpris``, ``cpris``, ``lsw``, ``csw``, ``rsnub``, ``csnub``).
+    extra : dict
+        Fitted extension parameters (units in the names).
+    cost : float
+        Sum over ``v_in``, ``i_in`` of the normalised MSE.
+    cost_per_signal : dict
+        The two terms of ``cost``.
+    rss, n_residuals, n_params : float, int, int
+        Normalised residual sum of squares, ``2 K`` and the fitted parameter
+        count (load, extension, initial states) for the information criterion.
+    predicted : dict
+        Model ``v_in`` (V) and ``i_in`` (A).
+    x0 : numpy.ndarray
+        Fitted initial condition, as coordinates in the basis of free responses.
+    """
+
+    cause: str
+    values: dict[str, float]
+    extra: dict[str, float]
+    cost: float
+    cost_per_signal: dict[str, float]
+    rss: float
+    n_residuals: int
+    n_params: int
+    predicted: dict[str, np.ndarray] = field(repr=False)
+    x0: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    theta: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    nfev: int = 0
+    wall_s: float = 0.0
+
+    @property
+    def bic(self) -> float:
+        """Bayesian information criterion ``N ln(RSS/N) + k ln N``."""
+        n = self.n_residuals
+        return float(n * np.log(max(self.rss, 1e-300) / n) + self.n_params * np.log(n))
+
+
+class _Problem:
+    """Measured record, nominal source and the machinery to evaluate and fit candidates."""
+
+    def __init__(self, w: Waveforms, nominal: Mapping[str, float], u: np.ndarray, r_load: float | None,
+                 snubber: tuple[float, float], fit_initial_state: bool = True):
+        self.h = w.dt
+        self.u = u
+        self.inp = _Input(u)
+        self.K = u.size
+        self.y = np.stack([w.v_in, w.i_in], axis=1)
+        self.sigma = np.array([np.std(w.v_in), np.std(w.i_in)])
+        self.weight = 1.0 / (self.sigma * math.sqrt(self.K))
+        self.nominal = dict(nominal)
+        self.snubber = snubber
+        self.fit_x0 = fit_initial_state
+        self.r_load_fixed = r_load
+        r0 = float(np.dot(w.v_in, w.i_in) / np.dot(w.i_in, w.i_in))
+        self.r_load0 = r_load if r_load is not None else r0
+        self._structures: dict[bool, _Structure] = {}
+
+    def structure(self, ringing: bool) -> _Structure:
+        if ringing not in self._structures:
+            n = self.nominal
+            self._structures[ringing] = _Structure(n["rpris"], n["lpris"], n["cpris"], ringing, *self.snubber)
+        return self._structures[ringing]
+
+    # -- parameters: [ln R_load (unless fixed), extension...]
+    def split(self, cand: _Candidate, th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        th = np.atleast_2d(th)
+        if self.r_load_fixed is None:
+            return np.exp(th[:, 0]), th[:, 1:]
+        return np.full(th.shape[0], self.r_load_fixed), th
+
+    def evaluate(self, cand: _Candidate, thetas: np.ndarray, full: bool = False):
+        """Normalised residual vectors (P, 2K) for parameter vectors ``thetas`` (P, p).
+
+        With ``full``, also the predictions (P, K, 2) and fitted initial states.
+        """
+        thetas = np.atleast_2d(np.asarray(thetas, float))
+        P = thetas.shape[0]
+        st = self.structure(cand.ringing)
+        res = np.empty((P, 2 * self.K))
+        preds = np.empty((P, self.K, 2)) if full else None
+        x0s = np.zeros((P, st.n)) if full else None
+        for c0 in range(0, P, _CHUNK):
+            sl = slice(c0, min(P, c0 + _CHUNK))
+            rl, ext = self.split(cand, thetas[sl])
+            over = cand.overrides(ext, self.nominal, self.snubber)
+            over["rload"] = rl
+            ss = st.state_space(over, rl.size)
+            for j in range(rl.size):
+                y, free = _simulate_one(ss.A[j], ss.B[j], ss.C[j], ss.D[j], self.inp, self.h, self.fit_x0)
+                x0 = np.zeros(st.n)
+                if self.fit_x0:
+                    M = free * self.weight[None, :, None]  # (K, 2, n)
+                    r = (self.y - y) * self.weight
+                    M2 = M.reshape(2 * self.K, st.n)
+                    G = M2.T @ M2
+                    c = M2.T @ r.ravel()
+                    d = np.sqrt(np.maximum(np.diag(G), 0.0))
+                    live = d > 1e-9 * max(d.max(), 1e-300)
+                    if live.any():
+                        Gs = G[np.ix_(live, live)] / np.outer(d[live], d[live])
+                        evals, evecs = np.linalg.eigh(Gs)
+                        inv = np.where(evals > 1e-12 * evals.max(), 1.0 / np.where(evals > 0, evals, 1.0), 0.0)
+                        x0[live] = (evecs @ (inv * (evecs.T @ (c[live] / d[live])))) / d[live]
+                        y = y + free @ x0
+                res[c0 + j] = ((y - self.y) * self.weight).ravel()
+                if full:
+                    preds[c0 + j] = y
+                    x0s[c0 + j] = x0
+        if full:
+            return res, preds, x0s
+        return res
+
+    def costs(self, cand: _Candidate, thetas: np.ndarray) -> np.ndarray:
+        return np.sum(self.evaluate(cand, thetas) ** 2, axis=1)
+
+    def bounds(self, cand: _Candidate) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = list(cand.lower), list(cand.upper)
+        if self.r_load_fixed is None:
+            lo = [math.log(self.r_load0 / 10)] + lo
+            hi = [math.log(self.r_load0 * 10)] + hi
+        return np.array(lo), np.array(hi)
+
+    def fit(self, cand: _Candidate, starts: Sequence[np.ndarray], max_nfev: int = 60) -> WaveformFit:
+        """Least-squares fit from each start; the lowest cost wins."""
+        t0 = time.perf_counter()
+        lo, hi = self.bounds(cand)
+        best_x, best_cost, nfev = None, np.inf, 0
+        if lo.size == 0:  # nothing to fit (baseline with a given load)
+            return self.result(cand, np.zeros(0), 0, time.perf_counter() - t0)
+        for x0 in starts:
+            x0 = np.clip(np.asarray(x0, float), lo + 1e-9, hi - 1e-9)
+            cache: dict[str, Any] = {}
+
+            def fun(x):
+                e = self.evaluate(cand, x[None])[0]
+                cache["x"], cache["e"] = x.copy(), e
+                return e
+
+            def jac(x):
+                e0 = cache["e"] if "x" in cache and np.array_equal(cache["x"], x) else fun(x)
+                steps = np.where(x + _FD_STEP <= hi, _FD_STEP, -_FD_STEP)
+                pert = x[None, :] + np.diag(steps)
+                E = self.evaluate(cand, pert)
+                return ((E - e0[None, :]) / steps[:, None]).T
+
+            sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", max_nfev=max_nfev,
+                                xtol=1e-10, ftol=1e-10, gtol=1e-10)
+            nfev += sol.nfev
+            cost = float(np.sum(sol.fun ** 2))
+            if cost < best_cost:
+                best_x, best_cost = sol.x, cost
+        return self.result(cand, best_x, nfev, time.perf_counter() - t0)
+
+    def result(self, cand: _Candidate, x: np.ndarray, nfev: int = 0, wall: float = 0.0) -> WaveformFit:
+        res, pred, x0 = self.evaluate(cand, np.asarray(x, float)[None], full=True)
+        e = res[0].reshape(self.K, 2)
+        # per-signal normalised MSE: mean(err^2) / var = sum((err w)^2) with w = 1 / (sigma sqrt K)
+        per = {s: float(np.sum(e[:, j] ** 2)) for j, s in enumerate(SIGNALS)}
+        cost = float(sum(per.values()))
+        rl, ext = self.split(cand, np.asarray(x, float))
+        values = dict(self.nominal)
+        values.update({"r_load": float(rl[0]), "lsw": 0.0, "csw": 0.0, "rsnub": 0.0, "csnub": 0.0})
+        for k, v in cand.overrides(ext, self.nominal, self.snubber).items():
+            values[k] = float(np.asarray(v).ravel()[0])
+        if cand.ringing and self.snubber[1] > 0:
+            values["rsnub"], values["csnub"] = self.snubber
+        n_par = len(cand.names) + (self.r_load_fixed is None) + (x0.shape[1] if self.fit_x0 else 0)
+        return WaveformFit(
+            cause=cand.cause, values=values, extra=cand.extra(ext[0], self.nominal, self.snubber) if ext.size else {},
+            cost=cost, cost_per_signal=per, rss=float(np.sum(e ** 2) * self.K), n_residuals=2 * self.K,
+            n_params=int(n_par), predicted={s: pred[0][:, j] for j, s in enumerate(SIGNALS)}, x0=x0[0],
+            theta=np.asarray(x, float), nfev=nfev, wall_s=wall)
+
+    def start(self, cand: _Candidate, ext: Sequence[float]) -> np.ndarray:
+        head = [] if self.r_load_fixed is not None else [math.log(self.r_load0)]
+        return np.array(head + list(ext), float)
+
+
+# ---------------------------------------------------------------------------
+# Evidence
+# ---------------------------------------------------------------------------
+
+
+def _edges(u: np.ndarray) -> np.ndarray:
+    """Indices k at which the commanded level changes (u[k] != u[k-1])."""
+    return np.flatnonzero(np.diff(u) != 0) + 1
+
+
+def _since_edge(u: np.ndarray, h: float) -> np.ndarray:
+    """Time since the last switching edge at every sample (s; from the record start before the first)."""
+    K = u.size
+    idx = np.zeros(K, dtype=np.int64)
+    e = _edges(u)
+    idx[e] = e
+    idx = np.maximum.accumulate(idx)
+    return (np.arange(K) - idx) * h
+
+
+def _bit_samples(u: np.ndarray) -> float:
+    e = _edges(u)
+    if e.size < 2:
+        return float(u.size)
+    runs = np.diff(e)
+    return float(runs.min())
+
+
+def _localise(u: np.ndarray, h: float, before: np.ndarray, after: np.ndarray | None) -> dict[str, Any]:
+    """Where in time the normalised residual energy sits: just after the edges or between them."""
+    since = _since_edge(u, h)
+    bit = _bit_samples(u) * h
+    window = max(3 * h, 0.05 * bit)
+    near = since < window
+    time_share = float(np.mean(near))
+
+    def share(e):
+        en = np.sum(e ** 2, axis=1)
+        tot = float(np.sum(en))
+        return float(np.sum(en[near]) / tot) if tot > 0 else 0.0
+
+    s_before = share(before)
+    if s_before >= max(0.5, 2.5 * time_share):
+        where = "waveform edges and ringing"
+    elif s_before <= 1.5 * time_share:
+        where = "steady parts between edges"
+    else:
+        where = "edges and steady parts alike"
+    edges_b = np.geomspace(max(h, bit / 1000), bit, 7)
+    bounds = np.concatenate([[0.0], edges_b[1:-1], [np.inf]])
+    profile = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        sel = (since >= a) & (since < b)
+        if not sel.any():
+            continue
+        row = {"from_s": float(a), "to_s": float(b) if np.isfinite(b) else None, "samples": int(sel.sum()),
+               "rms_before": float(np.sqrt(np.mean(np.sum(before[sel] ** 2, axis=1))))}
+        if after is not None:
+            row["rms_after"] = float(np.sqrt(np.mean(np.sum(after[sel] ** 2, axis=1))))
+        profile.append(row)
+    out = {"edge_window_s": window, "time_share_near_edges": time_share,
+           "residual_share_near_edges_before": s_before, "where": where,
+           "profile_by_time_since_edge": profile,
+           "note": "residuals normalised by each signal's standard deviation; rms in those units x sqrt(K)"}
+    if after is not None:
+        out["residual_share_near_edges_after"] = share(after)
+    return out
+
+
+def _residual_spectrum(e: np.ndarray, h: float, pad: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Power of the normalised residuals (both signals summed) on a zero-padded FFT grid."""
+    K = e.shape[0]
+    n = 1 << int(math.ceil(math.log2(K * pad)))
+    win = np.hanning(K)[:, None]
+    S = np.abs(np.fft.rfft((e - e.mean(axis=0)) * win, n=n, axis=0)) ** 2
+    return np.fft.rfftfreq(n, h), S.sum(axis=1)
+
+
+def _spectral_peaks(f: np.ndarray, S: np.ndarray, fmin: float, fmax: float, count: int = 3) -> list[float]:
+    """The ``count`` strongest local maxima of ``S`` within [fmin, fmax], at least 10 % apart."""
+    sel = np.flatnonzero((f >= fmin) & (f <= fmax))
+    if sel.size < 3:
+        return []
+    s = S[sel]
+    loc = np.flatnonzero((s[1:-1] >= s[:-2]) & (s[1:-1] >= s[2:])) + 1
+    order = loc[np.argsort(s[loc])[::-1]]
+    peaks: list[float] = []
+    for i in order:
+        k = sel[i]
+        # parabolic interpolation of the log power
+        a, b, c = np.log(S[k - 1] + 1e-300), np.log(S[k] + 1e-300), np.log(S[k + 1] + 1e-300)
+        den = a - 2 * b + c
+        d = 0.5 * (a - c) / den if den < 0 else 0.0
+        fp = float(f[k] + d * (f[1] - f[0]))
+        if all(abs(fp - q) > 0.1 * q for q in peaks):
+            peaks.append(fp)
+        if len(peaks) >= count:
+            break
+    return peaks
+
+
+# ---------------------------------------------------------------------------
+# Diagnosis
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class WaveformDiagnosis:
+    """Result of a waveform diagnosis (see :meth:`as_json` for the command-line keys)."""
+
+    cause: str
+    baseline: WaveformFit
+    best: WaveformFit | None
+    fits: list[WaveformFit]
+    time_s: np.ndarray
+    v_bprbs: np.ndarray
+    measured: dict[str, np.ndarray]
+    nominal: dict[str, float]
+    evidence: dict[str, Any] = field(default_factory=dict)
+    wall_s: float = 0.0
+
+    @property
+    def gain(self) -> float:
+        """Fraction of the baseline cost removed by the named extension (0 for ``none``)."""
+        return 0.0 if self.best is None else 1 - self.best.cost / self.baseline.cost
+
+    @property
+    def extended(self) -> WaveformFit:
+        """The chosen fit, or the baseline when the cause is ``none``."""
+        return self.best if self.best is not None else self.baseline
+
+    def candidates(self) -> list[dict[str, Any]]:
+        return [{"cause": r.cause, "cost": r.cost, "gain": 1 - r.cost / self.baseline.cost, "bic": r.bic,
+                 "delta_bic": self.baseline.bic - r.bic, "n_params": r.n_params, "extra": r.extra,
+                 "wall_s": r.wall_s} for r in self.fits]
+
+    def as_json(self) -> dict[str, Any]:
+        """The keys of the ``diagnose`` command (``cause``, ``candidates``, ``baseline_cost``,
+        ``extended_cost``, ``gain``) plus the fitted values and the evidence."""
+        ext = self.extended
+        return {
+            "cause": self.cause,
+            "candidates": self.candidates(),
+            "baseline_cost": self.baseline.cost,
+            "extended_cost": ext.cost,
+            "gain": self.gain,
+            "baseline_bic": self.baseline.bic,
+            "fitted_extension": self.best.extra if self.best else {},
+            "baseline_values": self.baseline.values,
+            "extended_values": self.best.values if self.best else {},
+            "evidence": self.evidence,
+            "realisation": {"kind": "source-settings",
+                            "note": "SourceSettings fields (rpris, lpris, cpris, lsw, csw, rsnub, csnub) and the "
+                                    "load resistance that reproduce the measurement",
+                            "values": ext.values},
+            "wall_s": self.wall_s,
+        }
+
+
+def load_waveforms(data: Waveforms | Mapping[str, Any] | str | os.PathLike) -> Waveforms:
+    """A :class:`Waveforms` from a record, a mapping of columns or a waveform CSV path.
+
+    Raises
+    ------
+    DiagnosisError
+        Missing columns, unreadable file, non-uniform sampling, NaNs.
+    """
+    if isinstance(data, Waveforms):
+        return data
+    if isinstance(data, (str, os.PathLike)):
+        try:
+            return read_waveform_csv(data)
+        except (ValueError, OSError) as exc:
+            raise DiagnosisError(" ".join(str(exc).split())) from None
+    if isinstance(data, Mapping):
+        missing = [c for c in ("time_s", "v_bprbs", "v_in", "i_in") if c not in data]
+        if missing:
+            raise DiagnosisError(f"waveform data lacks column(s) {', '.join(missing)} "
+                                 "(need time_s, v_bprbs, v_in, i_in)")
+        try:
+            return Waveforms(data["time_s"], data["v_bprbs"], data["v_in"], data["i_in"], data.get("v_out"))
+        except (ValueError, TypeError) as exc:
+            raise DiagnosisError(f"bad waveform data: {' '.join(str(exc).split())}") from None
+    raise DiagnosisError(f"waveform data must be a Waveforms, a mapping of columns or a CSV path, "
+                         f"got {type(data).__name__}")
+
+
+def _check_positive(**values: float | None) -> None:
+    for name, v in values.items():
+        if v is None:
+            continue
+        if not (isinstance(v, (int, float, np.floating)) and math.isfinite(v) and v > 0):
+            raise DiagnosisError(f"{name} must be a positive number (got {v!r})")
+
+
+def diagnose_waveforms(
+    waveforms: Waveforms | Mapping[str, Any] | str | os.PathLike,
+    rpris: float,
+    lpris: float,
+    cpris: float,
+    vdc: float | None = None,
+    r_load: float | None = None,
+    rsnub: float = 0.0,
+    csnub: float = 0.0,
+    min_delta_bic: float = 10.0,
+    min_gain: float = 0.2,
+    fit_initial_state: bool = True,
+    progress: bool = True,
+) -> WaveformDiagnosis:
+    """Diagnose measured PRIS waveforms of the source driving a resistive load.
+
+    Parameters
+    ----------
+    waveforms : Waveforms, mapping or path
+        ``time_s`` (s, uniform), ``v_bprbs`` (V, commanded bridge level held
+        from row k to k+1), ``v_in`` (V, load voltage), ``i_in`` (A).
+    rpris, lpris, cpris : float, Ohm, H, F
+        Nominal series R, L, C of the source.
+    vdc : float, V, optional
+        DC-link voltage; when given the commanded levels are taken as
+        ``sign(v_bprbs) * vdc`` (for records whose ``v_bprbs`` column is a
+        logic level or a scaled copy).
+    r_load : float, Ohm, optional
+        Load resistance if known exactly (default: fitted).
+    rsnub, csnub : float, Ohm, F
+        RC snubber across the bridge output, if fitted to the source (used by
+        the ``switch-ringing`` extension; it has no effect on an ideal bridge).
+    min_delta_bic, min_gain : float
+        Thresholds for naming a cause instead of ``none``.
+    fit_initial_state : bool
+        Fit the source's initial state (default); else start from rest.
+    progress : bool
+        Progress lines on stderr.
+
+    Returns
+    -------
+    WaveformDiagnosis
+
+    Raises
+    ------
+    DiagnosisError
+        Bad input (too few samples, non-uniform sampling, missing columns, no
+        switching, non-positive nominal values) or a baseline that does not
+        fit the data at all.
+    """
+    t_start = time.perf_counter()
+    _check_positive(rpris=rpris, lpris=lpris, cpris=cpris, vdc=vdc, r_load=r_load)
+    if rsnub < 0 or csnub < 0 or (rsnub > 0) != (csnub > 0):
+        raise DiagnosisError("snubber needs both rsnub > 0 and csnub > 0 (or neither)")
+    w = load_waveforms(waveforms)
+    K = w.n_samples
+    if K < MIN_SAMPLES:
+        raise DiagnosisError(f"too few samples: {K} (need at least {MIN_SAMPLES})")
+    u = np.sign(w.v_bprbs) * vdc if vdc is not None else np.array(w.v_bprbs, float)
+    edges = _edges(u)
+    if edges.size < 2:
+        raise DiagnosisError("v_bprbs switches fewer than twice: not a PRIS record (need the commanded bridge voltage)")
+    for s in SIGNALS:
+        if not np.std(getattr(w, s)) > 0:
+            raise DiagnosisError(f"{s} is constant: nothing to compare")
+    nominal = {"rpris": float(rpris), "lpris": float(lpris), "cpris": float(cpris)}
+    prob = _Problem(w, nominal, u, r_load, (float(rsnub), float(csnub)), fit_initial_state)
+    if not prob.r_load0 > 0:
+        raise DiagnosisError("v_in and i_in are not positively correlated: not a resistive load "
+                             "(or i_in has the wrong sign)")
+    h = w.dt
+    bit_s = _bit_samples(u) * h
+    fclk = 1.0 / bit_s
+    fmin_ring, fmax_ring = _RING_MIN_FCLK * fclk, _RING_MAX_FS / h
+
+    # ---- baseline
+    base_c = _Candidate("none", (), (), ())
+    baseline = prob.fit(base_c, [prob.start(base_c, [])], max_nfev=40)
+    _log(f"baseline fitted: cost {baseline.cost:.4g} (R_load {baseline.values['r_load']:.4g} Ohm) "
+         f"in {baseline.wall_s:.1f} s", progress)
+    worst = max(baseline.cost_per_signal.values())
+    if worst > MAX_BASELINE_NMSE:
+        bad = max(baseline.cost_per_signal, key=baseline.cost_per_signal.get)
+        raise DiagnosisError(
+            f"the baseline does not fit the data at all ({bad}: residual RMS {100 * math.sqrt(worst):.0f} % of the "
+            f"signal's standard deviation after fitting the load); check the nominal R, L, C, the units and the columns")
+    e_base = np.stack([(baseline.predicted[s] - getattr(w, s)) / prob.sigma[j] for j, s in enumerate(SIGNALS)], axis=1)
+    f_grid, S = _residual_spectrum(e_base, h)
+
+    # ---- candidates
+    results: list[WaveformFit] = []
+    rl0 = baseline.theta[:1] if r_load is None else np.zeros(0)
+    for cand in _candidates(fmin_ring, fmax_ring):
+        t = time.perf_counter()
+        head = list(rl0)
+        if cand.cause == "series-resistance":
+            res = prob.fit(cand, [np.array(head + [0.0]), np.array(head + [math.log(1.2)])])
+        elif cand.cause == "component-drift":
+            res = prob.fit(cand, [np.array(head + [0.0, 0.0]), np.array(head + [math.log(1.2), math.log(0.8)]),
+                                  np.array(head + [math.log(0.8), math.log(1.2)])])
+        else:
+            res = _fit_ringing(prob, cand, head, f_grid, S, fmin_ring, fmax_ring, progress)
+        res.wall_s = time.perf_counter() - t
+        results.append(res)
+        _log(f"{cand.cause}: cost {res.cost:.4g}, gain {1 - res.cost / baseline.cost:.3f}, "
+             f"dBIC {baseline.bic - res.bic:.1f} ({res.wall_s:.1f} s)", progress)
+
+    # ---- selection
+    best = min(results, key=lambda r: r.bic) if results else None
+    chosen = None
+    if best is not None and baseline.bic - best.bic >= min_delta_bic and 1 - best.cost / baseline.cost >= min_gain:
+        chosen = best
+    measured = {s: getattr(w, s) for s in SIGNALS}
+    diag = WaveformDiagnosis(chosen.cause if chosen else "none", baseline, chosen, results, w.time_s, u, measured,
+                             nominal)
+    e_after = None
+    if chosen is not None:
+        e_after = np.stack([(chosen.predicted[s] - measured[s]) / prob.sigma[j] for j, s in enumerate(SIGNALS)], axis=1)
+    rms = {}
+    for j, s in enumerate(SIGNALS):
+        sig_rms = float(np.sqrt(np.mean(measured[s] ** 2)))
+        b = float(np.sqrt(np.mean((baseline.predicted[s] - measured[s]) ** 2)))
+        a = float(np.sqrt(np.mean((diag.extended.predicted[s] - measured[s]) ** 2)))
+        rms[s] = {"unit": UNITS[s], "signal_rms": sig_rms, "before": b, "after": a,
+                  "before_percent_of_signal_rms": 100 * b / sig_rms, "after_percent_of_signal_rms": 100 * a / sig_rms}
+    peak = _spectral_peaks(f_grid, S, fmin_ring, fmax_ring, 1) if fmax_ring > fmin_ring else []
+    diag.evidence = {
+        "cost_definition": "sum over v_in and i_in of mean squared error / variance of the measured signal",
+        "samples": K, "fs_hz": w.fs, "bit_s": bit_s, "switching_edges": int(edges.size),
+        "r_load_ohm": {"baseline": baseline.values["r_load"], "extended": diag.extended.values["r_load"],
+                       "given": r_load},
+        "residual_rms": rms,
+        "localisation": _localise(u, h, e_base / math.sqrt(K), None if e_after is None else e_after / math.sqrt(K)),
+        "residual_spectrum_peak_hz": peak[0] if peak else None,
+        "ringing_search_band_hz": [fmin_ring, fmax_ring] if fmax_ring > 1.2 * fmin_ring else None,
+        "gain_per_signal": ({s: 1 - chosen.cost_per_signal[s] / baseline.cost_per_signal[s] for s in SIGNALS}
+                            if chosen else {}),
+        "criterion": (f"lowest BIC = N ln(RSS/N) + k ln N (N = 2 x samples, normalised residuals; k counts the load, "
+                      f"the extension and the initial states); named only if dBIC >= {min_delta_bic} and "
+                      f"gain >= {min_gain}"),
+    }
+    if chosen is not None and chosen.cause == "switch-ringing":
+        diag.evidence["ringing"] = _ringing_evidence(chosen)
+    diag.wall_s = time.perf_counter() - t_start
+    _log(f"cause: {diag.cause} (gain {diag.gain:.3f}) in {diag.wall_s:.1f} s", progress)
+    return diag
+
+
+def _ringing_evidence(fit: WaveformFit) -> dict[str, Any]:
+    x = fit.extra
+    out = {"f_ring_hz": x["f_ring_hz"], "lsw_h": x["lsw_h"], "csw_f": x["csw_f"],
+           "relation": "f_r = 1 / (2 pi sqrt(Lsw Csw)), thesis (5.1)"}
+    if "f_ring_snubbed_hz" in x:
+        out["f_ring_snubbed_hz"] = x["f_ring_snubbed_hz"]
+        out["relation"] += "; with the snubber f_r2 = 1 / (2 pi sqrt(Lsw (Csw + Cs))), (5.2)"
+    z0 = math.sqrt(x["lsw_h"] / x["csw_f"])
+    out["optimal_snubber_r_ohm"] = 0.5 * z0
+    out["note"] = "optimal snubber resistance taken as sqrt(Lsw/Csw)/2 (thesis 5.1.3)"
+    return out
+
+
+def _fit_ringing(prob: _Problem, cand: _Candidate, head: list[float], f_grid: np.ndarray, S: np.ndarray,
+                 fmin: float, fmax: float, progress: bool) -> WaveformFit:
+    """Ringing extension: starting frequencies from the residual spectrum and a cost scan, then least squares."""
+    T = prob.K * prob.h
+    z0s = [30.0, 150.0, 750.0]
+    trials: list[np.ndarray] = []
+    # fine scans (+-2 FFT bins of the unpadded record) around the residual's spectral peaks
+    for fp in _spectral_peaks(f_grid, S, fmin, fmax, 3):
+        for fq in fp + np.linspace(-4.0, 4.0, 33) / T:
+            if fmin < fq < fmax:
+                trials.append(np.array(head + [math.log(fq), math.log(z0s[1])]))
+    # coarse log scan for heavily damped ringing
+    for fq in np.geomspace(fmin * 1.05, fmax * 0.95, 24):
+        for z in z0s:
+            trials.append(np.array(head + [math.log(fq), math.log(z)]))
+    costs = prob.costs(cand, np.array(trials))
+    order = np.argsort(costs)
+    picked: list[np.ndarray] = []
+    for i in order:
+        if all(abs(trials[i][-2] - p[-2]) > 0.02 or abs(trials[i][-1] - p[-1]) > 0.5 for p in picked):
+            picked.append(trials[i])
+        if len(picked) >= 3:
+            break
+    _log(f"switch-ringing: {len(trials)} scan points, starts at "
+         f"{', '.join(f'{math.exp(p[-2]) / 1e6:.4g} MHz' for p in picked)}", progress)
+    return prob.fit(cand, picked, max_nfev=40)
+
+
+# ---------------------------------------------------------------------------
+# Report
+# ---------------------------------------------------------------------------
+
+
+def _fmt(v: float, unit: str = "") -> str:
+    if v is None:
+        return "-"
+    a = abs(v)
+    if a == 0:
+        return f"0 {unit}".strip()
+    prefixes = [(1e6, "M"), (1e3, "k"), (1, ""), (1e-3, "m"), (1e-6, "u"), (1e-9, "n"), (1e-12, "p")]
+    if unit:
+        for s, p in prefixes:
+            if a >= s:
+                return f"{v / s:.4g} {p}{unit}"
+        return f"{v:.4g} {unit}"
+    return f"{v:.4g}"
+
+
+_PARAM_UNITS = {"_ohm": "Ohm", "_h": "H", "_f": "F", "_hz": "Hz", "_percent": "%", "_percent_of_nominal": "%"}
+
+
+def _param_text(name: str, value: float) -> str:
+    for suffix in sorted(_PARAM_UNITS, key=len, reverse=True):
+        if name.endswith(suffix):
+            unit = _PARAM_UNITS[suffix]
+            return f"{value:.3g} %" if unit == "%" else _fmt(value, unit)
+    return f"{value:.4g}"
+
+
+def write_report(diagnosis: WaveformDiagnosis, directory: str | os.PathLike) -> Path:
+    """Write ``report.md`` and its figures (``waveforms_edge.png``, ``residuals.png``) into ``directory``.
+
+    Returns
+    -------
+    pathlib.Path
+        The report file.
+    """
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    d = diagnosis
+    ev = d.evidence
+    figs = _plots(d, out)
+    lines = ["# Waveform diagnosis of the PRIS source", ""]
+    lines += [f"**Cause: `{d.cause}`** (gain {d.gain:.3f}: fraction of the baseline cost removed)", ""]
+    lines += ["Nominal source: " + ", ".join([f"R_pris = {_fmt(d.nominal['rpris'], 'Ohm')}",
+                                             f"L_pris = {_fmt(d.nominal['lpris'], 'H')}",
+                                             f"C_pris = {_fmt(d.nominal['cpris'], 'F')}"])
+              + f"; fitted load {_fmt(ev['r_load_ohm']['extended'], 'Ohm')}.", ""]
+    lines += [f"Record: {ev['samples']} samples at {_fmt(ev['fs_hz'], 'S/s')}, {ev['switching_edges']} switching "
+              f"edges, bit length {_fmt(ev['bit_s'], 's')}.", ""]
+    lines += [f"Cost: {ev['cost_definition']}.", ""]
+    lines += ["## Candidates", "", "| cause | cost | gain | dBIC | parameters |", "|---|---|---|---|---|",
+              f"| baseline | {d.baseline.cost:.4g} | 0 | 0 | R_load {_fmt(d.baseline.values['r_load'], 'Ohm')} |"]
+    for c in d.candidates():
+        params = ", ".join(f"{k} = {_param_text(k, v)}" for k, v in c["extra"].items())
+        mark = " **(named)**" if d.best is not None and c["cause"] == d.best.cause else ""
+        lines.append(f"| {c['cause']}{mark} | {c['cost']:.4g} | {c['gain']:.3f} | {c['delta_bic']:.1f} | {params} |")
+    lines += ["", f"Rule: {ev['criterion']}.", ""]
+    lines += ["## Residuals", "", "| signal | RMS before | after | before (% of signal RMS) | after (%) |",
+              "|---|---|---|---|---|"]
+    for s, r in ev["residual_rms"].items():
+        lines.append(f"| {s} | {_fmt(r['before'], r['unit'])} | {_fmt(r['after'], r['unit'])} | "
+                     f"{r['before_percent_of_signal_rms']:.3g} | {r['after_percent_of_signal_rms']:.3g} |")
+    loc = ev["localisation"]
+    lines += ["", f"Where the baseline residual sits: **{loc['where']}** — "
+              f"{100 * loc['residual_share_near_edges_before']:.0f} % of its energy within "
+              f"{_fmt(loc['edge_window_s'], 's')} after an edge, which is {100 * loc['time_share_near_edges']:.0f} % "
+              "of the record."]
+    if "residual_share_near_edges_after" in loc:
+        lines[-1] += f" After the extension: {100 * loc['residual_share_near_edges_after']:.0f} %."
+    lines += ["", "| time since edge | samples | residual RMS before | after |", "|---|---|---|---|"]
+    for row in loc["profile_by_time_since_edge"]:
+        to = _fmt(row["to_s"], "s") if row["to_s"] is not None else "end of bit"
+        lines.append(f"| {_fmt(row['from_s'], 's')} - {to} | {row['samples']} | {row['rms_before']:.3g} | "
+                     f"{row.get('rms_after', float('nan')):.3g} |")
+    if ev.get("residual_spectrum_peak_hz"):
+        lines += ["", f"Strongest peak of the baseline residual spectrum in the ringing band: "
+                      f"{_fmt(ev['residual_spectrum_peak_hz'], 'Hz')}."]
+    if "ringing" in ev:
+        r = ev["ringing"]
+        lines += ["", "## Switch ringing", "",
+                  f"L_sw = {_fmt(r['lsw_h'], 'H')}, C_sw = {_fmt(r['csw_f'], 'F')}: ringing frequency "
+                  f"{_fmt(r['f_ring_hz'], 'Hz')} ({r['relation']})."]
+        if "f_ring_snubbed_hz" in r:
+            lines[-1] += f" With the snubber: {_fmt(r['f_ring_snubbed_hz'], 'Hz')}."
+        lines[-1] += f" A snubber resistance of about {_fmt(r['optimal_snubber_r_ohm'], 'Ohm')} would damp it."
+    lines += ["", "## Figures", ""] + [f"![{name}]({name})" for name in figs] + [""]
+    path = out / "report.md"
+    path.write_text("\n".join(lines), encoding="utf-8")
+    return path
+
+
+def _plots(d: WaveformDiagnosis, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    t = d.time_s - d.time_s[0]
+    h = float(t[1] - t[0])
+    edges = _edges(d.v_bprbs)
+    err = sum(((d.baseline.predicted[s] - d.measured[s]) / np.std(d.measured[s])) ** 2 for s in SIGNALS)
+    bit = int(_bit_samples(d.v_bprbs))
+    # the edge whose following bit carries the largest baseline residual
+    scores = [float(np.sum(err[e:e + bit])) for e in edges]
+    e0 = int(edges[int(np.argmax(scores))]) if edges.size else 0
+    ext = d.extended
+    f_ring = d.best.extra.get("f_ring_observed_hz") if d.best is not None else None
+    short = int(round(12 / f_ring / h)) if f_ring else max(bit // 8, 10)
+    windows = [(max(0, e0 - bit // 10), min(t.size, e0 + bit)), (max(0, e0 - max(short // 8, 2)), min(t.size, e0 + short))]
+    names = []
+    fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), squeeze=False)
+    for col, (a, b) in enumerate(windows):
+        for row, s in enumerate(SIGNALS):
+            ax = axes[row][col]
+            tt = t[a:b] * 1e6
+            ax.plot(tt, d.measured[s][a:b], "k.", ms=2.5, label="measured")
+            ax.plot(tt, d.baseline.predicted[s][a:b], "C0-", lw=1, label="baseline (nominal R, L, C)")
+            if d.best is not None:
+                ax.plot(tt, ext.predicted[s][a:b], "C3--", lw=1, label=f"extended ({d.cause})")
+            ax.axvline(t[e0] * 1e6, color="0.7", lw=0.8)
+            ax.set_ylabel(f"{s} ({UNITS[s]})")
+            if row == 1:
+                ax.set_xlabel("time (us)")
+            if row == 0 and col == 0:
+                ax.legend(fontsize=8)
+    axes[0][0].set_title("one bit after the edge with the largest baseline error")
+    axes[0][1].set_title("zoom on the edge")
+    fig.tight_layout()
+    fig.savefig(out / "waveforms_edge.png", dpi=110)
+    plt.close(fig)
+    names.append("waveforms_edge.png")
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+    for row, s in enumerate(SIGNALS):
+        ax = axes[row]
+        ax.plot(t * 1e3, d.baseline.predicted[s] - d.measured[s], "C0-", lw=0.6, label="baseline residual")
+        if d.best is not None:
+            ax.plot(t * 1e3, ext.predicted[s] - d.measured[s], "C3-", lw=0.6, label=f"after {d.cause}")
+        ax.set_ylabel(f"{s} residual ({UNITS[s]})")
+        ax.legend(fontsize=8, loc="upper right")
+    axes[1].set_xlabel("time (ms)")
+    fig.tight_layout()
+    fig.savefig(out / "residuals.png", dpi=110)
+    plt.close(fig)
+    names.append("residuals.png")
+    return names

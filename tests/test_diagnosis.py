@@ -1,0 +1,98 @@
+"""Diagnosis finds the effect hidden in generated data, names skin effect in real data, and refuses bad input."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from estimation.diagnosis import DiagnosisError, diagnose_frequency
+from estimation.diagnosis.report import write_report
+from estimation.diagnosis.synthetic import FREQUENCY_CAUSES, one_port_case, two_winding_case
+from pris_cosim.measured import read_multisegment_csv
+from pris_cosim.models import get_model
+from pris_cosim.netlist import parse_netlist
+
+from conftest import SHARED
+
+REAL = SHARED / "data" / "real" / "small_transformer_3_loads.csv"
+DRAW = np.random.default_rng(20261121)  # hidden effects drawn at random, reproducibly
+
+
+@pytest.mark.parametrize("cause", FREQUENCY_CAUSES)
+def test_one_port_hidden_effect_is_named(cause):
+    seed = int(DRAW.integers(1, 10_000))
+    case = one_port_case(cause, seed)
+    d = diagnose_frequency(case.frequency_hz, case.measured, model=case.baseline, progress=False)
+    assert d.cause == cause, (seed, d.candidates())
+    if cause != "none":
+        assert d.gain >= 0.5
+
+
+def test_two_winding_hidden_skin_effect():
+    case = two_winding_case("skin-effect", 3, points=80)
+    d = diagnose_frequency(case.frequency_hz, case.measured, model=case.baseline, progress=False)
+    assert d.cause == "skin-effect" and d.gain >= 0.5
+    assert set(d.evidence["gain_per_response"]) == {"Zlvoc", "Zlvsc", "Zhvoc", "Zhvsc", "Rlvhv", "Rhvlv"}
+
+
+@pytest.fixture(scope="module")
+def real_short():
+    if not REAL.exists():
+        pytest.skip(f"real data not found at {REAL}")
+    return read_multisegment_csv(REAL, "short")
+
+
+def test_real_short_circuit_is_skin_effect(real_short, tmp_path):
+    d = diagnose_frequency(real_short.frequency_hz, real_short.responses, progress=False)
+    assert d.cause == "skin-effect" and d.gain >= 0.5
+    # the fitted resistance rises with frequency, as the measured real part does (about tenfold 10 kHz - 350 kHz)
+    assert d.best.extra["a"] > 1
+    assert d.realisation["kind"] == "ladder" and d.realisation["max_deviation_db"] < 0.1
+    report = write_report(d, tmp_path / "rep", source="short")
+    text = report.read_text()
+    assert "skin-effect" in text and (tmp_path / "rep" / "fits.png").stat().st_size > 10_000
+    assert (tmp_path / "rep" / "extended.cir").exists()
+
+
+def test_cli_real_open_segment_report(tmp_path):
+    if not REAL.exists():
+        pytest.skip("real data missing")
+    proc = subprocess.run([sys.executable, "-m", "pris_cosim", "diagnose", "--measured", str(REAL), "--segment", "open",
+                           "--report", str(tmp_path / "open"), "--json"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert {"cause", "candidates", "baseline_cost", "extended_cost", "gain"} <= set(out)
+    assert all({"cause", "cost", "gain"} <= set(c) for c in out["candidates"])
+    text = (tmp_path / "open" / "report.md").read_text()
+    assert "Candidates" in text and "Residual per band" in text
+
+
+def test_responses_not_matching_model():
+    case = one_port_case("none", 1)
+    with pytest.raises(DiagnosisError, match="'Zin' is not a response of the model"):
+        diagnose_frequency(case.frequency_hz, case.measured, model=get_model("hv-4section"), progress=False)
+
+
+def test_too_few_points():
+    case = one_port_case("none", 1, points=4)
+    with pytest.raises(DiagnosisError, match="too few points"):
+        diagnose_frequency(case.frequency_hz, case.measured, model=case.baseline, progress=False)
+
+
+def test_baseline_that_does_not_fit_at_all():
+    f = np.logspace(3, 6, 100)
+    capacitor = 1 / (2j * np.pi * f * 1e-9) * (1 + 0j)
+    inductor = parse_netlist("* R-L\nR1 in x 1\nL1 x 0 1m\n")
+    with pytest.raises(DiagnosisError, match="does not fit the data at all"):
+        diagnose_frequency(f, {"Zin": capacitor}, circuit=inductor, port="in", progress=False)
+
+
+def test_cli_bad_input_one_line(tmp_path):
+    bad = tmp_path / "z.csv"
+    bad.write_text("frequency_hz,Zin_mag,Zin_phase_deg\n10,1,0\n5,1,0\n")
+    proc = subprocess.run([sys.executable, "-m", "pris_cosim", "diagnose", "--measured", str(bad), "--json"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert len(proc.stderr.strip().splitlines()) == 1 and "z.csv" in proc.stderr
