@@ -185,6 +185,34 @@ def cmd_models(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------- reproduce
+def _reproduce_parser(sub: Any) -> None:
+    p = sub.add_parser("reproduce", help="reproduce the thesis's simulated-perturbation figures (4.3-4.7, 4.11-4.12)")
+    p.add_argument("figure", choices=("impedance-level", "two-section", "three-section", "all"))
+    p.add_argument("--out", default="figures", metavar="DIR", help="directory for the PNG files (default: figures)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_reproduce)
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    from . import reproductions as rp
+
+    jobs = {"impedance-level": rp.impedance_level_study, "two-section": rp.two_section_responses,
+            "three-section": rp.three_section_responses}
+    names = list(jobs) if args.figure == "all" else [args.figure]
+    out = {}
+    for name in names:
+        print(f"reproduce: {name} ...", file=sys.stderr, flush=True)
+        out[name] = jobs[name](out_dir=args.out)
+    if args.json:
+        _emit({"figures": out, "out": args.out})
+    else:
+        for name, res in out.items():
+            for key, m in res.items():
+                print(f"{name} {key}: median error {m['median_rel_error']:.3%}, 90th percentile {m['p90_rel_error']:.3%}")
+    return 0
+
+
 # ---------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pris-cosim", description="PRIS perturbation, circuits, FMUs and estimation")
@@ -192,6 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _frf_parser(sub)
     _models_parser(sub)
+    _reproduce_parser(sub)
     from .cli_sim import register as register_simulation
 
     register_simulation(sub)

@@ -137,6 +137,16 @@ class _Structure:
         return StateSpace(ss.A, ss.B, Cy, Dy, list(ss.states), list(ss.inputs), list(SIGNALS))
 
 
+def _small_product(X: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """``X @ R`` for a tall ``X`` with few columns, without BLAS (whose threads stall on a busy machine)."""
+    out = np.zeros((X.shape[0], R.shape[1]))
+    for c in range(X.shape[1]):
+        for j in range(R.shape[1]):
+            if R[c, j] != 0:
+                out[:, j] += X[:, c] * R[c, j]
+    return out
+
+
 class _Input:
     """A piecewise-constant input split into runs of constant value (for the closed-form modal response)."""
 
@@ -183,7 +193,7 @@ def _simulate_one(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, in
         fac = np.where(mu_k.imag > 0, 2.0, 1.0)
         bt = (W @ B[:, 0])[keep]
         CV = (C @ V)[:, keep] * fac[None, :]  # (2, m)
-        z_ss = -np.outer(inp.levels, bt / mu_k)  # (runs, m)
+        z_ss = -np.outer(inp.levels, (bt / mu_k).astype(complex))  # (runs, m)
         if inp.starts.size <= _MAX_RUNS:
             pw = np.exp(np.outer(np.arange(inp.max_len + 1) * h, mu_k))  # (max_len + 1, m)
             starts = np.empty_like(z_ss)
@@ -203,7 +213,7 @@ def _simulate_one(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, in
         R = np.empty((2 * mu_k.size, 2))
         R[0::2] = CV.real.T
         R[1::2] = -CV.imag.T
-        y = np.ascontiguousarray(zk).view(np.float64) @ R + u[:, None] * D[:, 0][None, :]
+        y = _small_product(np.ascontiguousarray(zk).view(np.float64), R) + u[:, None] * D[:, 0][None, :]
         free = None
         if want_free:
             if inp.starts.size <= _MAX_RUNS:
@@ -428,7 +438,7 @@ class _Problem:
                         evals, evecs = np.linalg.eigh(Gs)
                         inv = np.where(evals > 1e-12 * evals.max(), 1.0 / np.where(evals > 0, evals, 1.0), 0.0)
                         x0[live] = (evecs @ (inv * (evecs.T @ (c[live] / d[live])))) / d[live]
-                        y = y + free @ x0
+                        y = y + _small_product(free.reshape(2 * self.K, st.n), x0[:, None]).reshape(self.K, 2)
                 res[c0 + j] = ((y - self.y) * self.weight).ravel()
                 if full:
                     preds[c0 + j] = y
