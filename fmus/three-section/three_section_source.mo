@@ -1,0 +1,37 @@
+model three_section_source "PRIS source: PRBS-driven H-bridge and series RLC"
+  import SI = Modelica.Units.SI;
+  Modelica.Electrical.Analog.Sources.SignalVoltage Vbridge;
+  Modelica.Electrical.Analog.Basic.Resistor Rpris(R = 31800.0);
+  Modelica.Electrical.Analog.Basic.Capacitor Cpris(C = 1e-08);
+  Modelica.Electrical.Analog.Sources.SignalVoltage Vdut;
+  Modelica.Electrical.Analog.Basic.Inductor Lpris(L = 2.53);
+  Modelica.Electrical.Analog.Basic.Ground ground;
+  parameter SI.Voltage vdc = 30.0 "H-bridge DC voltage (levels +-vdc)";
+  parameter SI.Frequency fclk = 10000.0 "PRBS clock frequency";
+  parameter Integer prbs_order = 12 "LFSR order n (period 2^n - 1 bits, n <= 30 here)";
+  parameter Integer taps[:] = {12, 6, 4, 1} "maximal-length LFSR taps of this order";
+  discrete Integer reg(start = integer(2^prbs_order) - 1, fixed = true) "next prbs_order output bits, first one in the most significant bit (all-ones seed)";
+  discrete Integer feedback(start = 0, fixed = true);
+  Modelica.Blocks.Interfaces.RealInput v_in "DUT terminal voltage, V";
+  Modelica.Blocks.Interfaces.RealOutput i_in "current from the source RLC into the DUT terminal, A";
+  Modelica.Blocks.Interfaces.RealOutput v_bprbs "commanded H-bridge voltage, V";
+equation
+  connect(Vbridge.p, Rpris.p);
+  connect(Vbridge.n, Cpris.n);
+  connect(Vbridge.n, ground.p);
+  connect(Rpris.n, Vdut.p);
+  connect(Cpris.p, Lpris.n);
+  connect(Vdut.n, Lpris.p);
+  connect(v_in, Vdut.v);
+  i_in = Lpris.i;
+  v_bprbs = if mod(div(reg, integer(2^(prbs_order - 1))), 2) == 1 then vdc else -vdc;
+  Vbridge.v = v_bprbs;
+algorithm
+  when sample(1 / fclk, 1 / fclk) then
+    feedback := 0;
+    for t in taps loop
+      feedback := mod(feedback + mod(div(reg, integer(2^(t - 1))), 2), 2);
+    end for;
+    reg := mod(2 * reg + feedback, integer(2^prbs_order));
+  end when;
+end three_section_source;

@@ -1,0 +1,34 @@
+model two_section_dut "Two-section winding model, thesis Fig. 4.1, Table 4.2 driven by a current at in"
+  import SI = Modelica.Units.SI;
+  parameter SI.Resistance R1 = 10.0;
+  parameter SI.Resistance R2 = 10.0;
+  parameter SI.Capacitance C1 = 1e-09;
+  parameter SI.Capacitance C2 = 1e-09;
+  parameter SI.Inductance L1 = 10.0;
+  parameter SI.Inductance L2 = 100.0;
+  parameter SI.Inductance M12 = 30.0;
+  Modelica.Electrical.Analog.Basic.Capacitor C1_1(C = C1);
+  Modelica.Electrical.Analog.Basic.Resistor R1_1(R = R1);
+  Modelica.Electrical.Analog.Basic.Capacitor C2_1(C = C2);
+  Modelica.Electrical.Analog.Basic.Resistor R2_1(R = R2);
+  Modelica.Electrical.Analog.Basic.M_Transformer M_L1_L2(N = 2, L = {(L1), ((M12 / sqrt((L1 * L2))))*sqrt((L1)*(L2)), (L2)}) "L1, L2";
+  Modelica.Electrical.Analog.Basic.Ground ground;
+  Modelica.Blocks.Interfaces.RealInput i_in "current injected into the port, A";
+  Modelica.Electrical.Analog.Sources.SignalCurrent Iin;
+  Modelica.Blocks.Interfaces.RealOutput v_in "port voltage v(in), V";
+  Modelica.Blocks.Interfaces.RealOutput v_mid "voltage of node mid, V";
+equation
+  connect(C1_1.p, R1_1.p);
+  connect(C1_1.p, Iin.n);
+  connect(C1_1.n, C2_1.p);
+  connect(C1_1.n, R2_1.p);
+  connect(C1_1.n, M_L1_L2.n[1]);
+  connect(R1_1.n, M_L1_L2.p[1]);
+  connect(C2_1.n, M_L1_L2.n[2]);
+  connect(C2_1.n, ground.p);
+  connect(C2_1.n, Iin.p);
+  connect(R2_1.n, M_L1_L2.p[2]);
+  connect(i_in, Iin.i);
+  v_in = C1_1.p.v;
+  v_mid = C1_1.n.v;
+end two_section_dut;
