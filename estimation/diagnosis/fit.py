@@ -207,8 +207,8 @@ class FrequencyFit:
         return np.array(lo), np.array(hi)
 
     def fit(self, extra_starts: Sequence[Mapping[str, float]] | None = None, max_nfev: int = 100,
-            cause: str | None = None) -> FitResult:
-        """Fit from each start (extension parameter guesses); keep the best."""
+            cause: str | None = None, keep_starts: int = 3) -> FitResult:
+        """Fit from the most promising starts (extension parameter guesses, screened in one batch); keep the best."""
         t0 = time.perf_counter()
         lo, hi = self.bounds()
         starts = list(extra_starts or [{}])
@@ -216,11 +216,14 @@ class FrequencyFit:
             grids = np.meshgrid(*[p.starts for p in self.extra], indexing="ij")
             starts = [{p.name: float(g.flat[i]) for p, g in zip(self.extra, grids)} for i in range(grids[0].size)]
         best = None
-        nfev = 0
-        for s in starts:
-            x0 = np.concatenate([np.zeros(len(self.free)),
-                                 [np.log(s[p.name]) if p.log else s[p.name] for p in self.extra]])
-            x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
+        x0s = np.array([np.clip(np.concatenate([np.zeros(len(self.free)),
+                                                [np.log(s[p.name]) if p.log else s[p.name] for p in self.extra]]),
+                                lo + 1e-9, hi - 1e-9) for s in starts])
+        nfev = len(x0s)
+        if len(x0s) > keep_starts:  # screen all starts in one batch, fit from the most promising ones
+            r = self.residuals_batch(x0s)
+            x0s = x0s[np.argsort(np.sum(r * r, axis=1))[:keep_starts]]
+        for x0 in x0s:
             sol = least_squares(self.residuals, x0, jac=self.jacobian, bounds=(lo, hi), x_scale="jac",
                                 max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
             nfev += sol.nfev

@@ -83,8 +83,11 @@ UNITS = {"v_in": "V", "i_in": "A"}
 
 #: Fewest samples accepted.
 MIN_SAMPLES = 64
-#: A baseline whose normalised MSE exceeds this for either signal "does not fit at all".
-MAX_BASELINE_NMSE = 0.25
+#: A baseline whose normalised MSE exceeds this for either signal "does not fit at all" (residual RMS
+#: 28 % of the signal's standard deviation; a 2x error in L or C gives about 0.06, 10x errors 0.1-0.8).
+MAX_BASELINE_NMSE = 0.08
+#: ... or whose fitted load differs from the direct estimate sum(v i) / sum(i^2) by more than this.
+MAX_LOAD_MISMATCH = 0.2
 #: Largest parameter batch simulated at once (memory: batch x samples x 2 x states doubles).
 _CHUNK = 8
 #: Finite-difference step of the Jacobian, in log-parameter units.
@@ -166,9 +169,11 @@ class _Input:
 _MAX_RUNS = 4000
 
 
-def _simulate_one(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, inp: _Input,
-                  h: float, want_free: bool) -> tuple[np.ndarray, np.ndarray | None]:
-    """Forced outputs (K, 2) from zero state and a basis (K, 2, n) of the free responses, exact ZOH.
+def _simulate_one(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, inp: _Input, h: float,
+                  want_free: bool, x0: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Exact ZOH outputs (K, 2) from the initial state ``x0`` (default zero), and optionally a basis
+    (K, 2, n) of the free responses with the matrix (n, n) turning basis coordinates into a state.
 
     Modal form: ``A = V diag(mu) V^-1``; over a run of constant input ``U``
     each mode follows ``z[k0 + m] = z_ss + exp(mu h m) (z[k0] - z_ss)`` with
@@ -176,6 +181,7 @@ def _simulate_one(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, in
     Only one mode of each complex-conjugate pair is kept (the outputs are
     twice its real part). The free-response basis spans the responses to
     every initial state: one real column per real mode, two per complex pair.
+    An ill-conditioned eigenbasis falls back to ``simulate_pwc``.
     """
     n = A.shape[0]
     K = inp.K
@@ -190,14 +196,18 @@ def _simulate_one(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, in
             ok = False
     if ok:
         mu_k = mu[keep]
-        fac = np.where(mu_k.imag > 0, 2.0, 1.0)
+        m = mu_k.size
+        cplx = mu_k.imag > 0
+        fac = np.where(cplx, 2.0, 1.0)
         bt = (W @ B[:, 0])[keep]
         CV = (C @ V)[:, keep] * fac[None, :]  # (2, m)
+        z0 = np.zeros(m, complex) if x0 is None else (W @ np.asarray(x0, float))[keep]
         z_ss = -np.outer(inp.levels, (bt / mu_k).astype(complex))  # (runs, m)
-        if inp.starts.size <= _MAX_RUNS:
+        runs = inp.starts.size <= _MAX_RUNS
+        if runs:
             pw = np.exp(np.outer(np.arange(inp.max_len + 1) * h, mu_k))  # (max_len + 1, m)
             starts = np.empty_like(z_ss)
-            z = np.zeros(mu_k.size, complex)
+            z = z0.copy()
             decay = pw[inp.lengths]  # (runs, m)
             for j in range(inp.starts.size):
                 starts[j] = z
@@ -206,39 +216,44 @@ def _simulate_one(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, in
         else:
             lam = np.exp(mu_k * h)
             g = np.expm1(mu_k * h) / mu_k * bt
-            zk = np.empty((K, mu_k.size), complex)
-            for i in range(mu_k.size):
+            zk = np.empty((K, m), complex)
+            for i in range(m):
                 zk[:, i] = lfilter([0.0, g[i]], [1.0, -lam[i]], u)
+            if x0 is not None:
+                zk += np.exp(np.outer(np.arange(K) * h, mu_k)) * z0[None, :]
         # Re(zk @ CV.T) as a real product: interleaved (re, im) columns against (Re CV, -Im CV)
-        R = np.empty((2 * mu_k.size, 2))
+        R = np.empty((2 * m, 2))
         R[0::2] = CV.real.T
         R[1::2] = -CV.imag.T
         y = _small_product(np.ascontiguousarray(zk).view(np.float64), R) + u[:, None] * D[:, 0][None, :]
-        free = None
-        if want_free:
-            if inp.starts.size <= _MAX_RUNS:
-                lamk = np.exp(mu_k * h * inp.starts[:, None])[inp.seg] * pw[inp.offset]  # exp(mu h k)
-            else:
-                lamk = np.exp(np.outer(np.arange(K) * h, mu_k))
-            cols = []
-            for i in range(mu_k.size):
-                q = lamk[:, i, None] * CV[None, :, i]  # (K, 2)
-                cols.append(q.real)
-                if mu_k[i].imag > 0:
-                    cols.append(q.imag)
-            free = np.stack(cols, axis=2)
-        return y, free
+        if not want_free:
+            return y, None, None
+        if runs:
+            lamk = np.exp(mu_k * h * inp.starts[:, None])[inp.seg] * pw[inp.offset]  # exp(mu h k)
+        else:
+            lamk = np.exp(np.outer(np.arange(K) * h, mu_k))
+        cols = []
+        to_state = np.zeros((n, n))
+        Vk = V[:, keep] * fac[None, :]
+        for i in range(m):
+            q = lamk[:, i, None] * CV[None, :, i]  # (K, 2)
+            to_state[:, len(cols)] = Vk[:, i].real  # z0_i = 1: Re(fac V_i)
+            cols.append(q.real)
+            if cplx[i]:  # z0_i = -1j: Re(q * -1j) = q.imag
+                to_state[:, len(cols)] = (Vk[:, i] * -1j).real
+                cols.append(q.imag)
+        return y, np.stack(cols, axis=2), to_state
     ss = StateSpace(A[None], B[None], C[None], D[None], [], [], list(SIGNALS))
-    _, y = simulate_pwc(ss, u, h)
-    free = None
-    if want_free:
-        free = np.empty((K, 2, n))
-        zero = np.zeros(K)
-        for j in range(n):
-            e = np.zeros(n)
-            e[j] = 1.0
-            free[:, :, j] = simulate_pwc(ss, zero, h, x0=e)[1]
-    return y, free
+    _, y = simulate_pwc(ss, u, h, x0=None if x0 is None else np.asarray(x0, float))
+    if not want_free:
+        return y, None, None
+    free = np.empty((K, 2, n))
+    zero = np.zeros(K)
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = 1.0
+        free[:, :, j] = simulate_pwc(ss, zero, h, x0=e)[1]
+    return y, free, np.eye(n)
 
 
 # ---------------------------------------------------------------------------
@@ -256,7 +271,8 @@ class _Candidate:
     upper: tuple[float, ...]
     ringing: bool = False
 
-    def overrides(self, th: np.ndarray, nominal: Mapping[str, float], snubber: tuple[float, float]) -> dict[str, np.ndarray]:
+    def overrides(self, th: np.ndarray, nominal: Mapping[str, float],
+                  snubber: tuple[float, float]) -> dict[str, np.ndarray]:
         """Element values (P,) for extension parameters ``th`` (P, q)."""
         R, L, C = nominal["rpris"], nominal["lpris"], nominal["cpris"]
         if self.cause == "series-resistance":
@@ -405,17 +421,21 @@ class _Problem:
             return np.exp(th[:, 0]), th[:, 1:]
         return np.full(th.shape[0], self.r_load_fixed), th
 
-    def evaluate(self, cand: _Candidate, thetas: np.ndarray, full: bool = False):
+    def evaluate(self, cand: _Candidate, thetas: np.ndarray, full: bool = False, project: bool = True,
+                 x0: np.ndarray | None = None):
         """Normalised residual vectors (P, 2K) for parameter vectors ``thetas`` (P, p).
 
-        With ``full``, also the predictions (P, K, 2) and fitted initial states.
+        ``project``: fit the initial state of every parameter set (variable
+        projection); otherwise use ``x0`` (a state, default zero) for all.
+        With ``full``, also the predictions (P, K, 2) and the initial states (P, n).
         """
         thetas = np.atleast_2d(np.asarray(thetas, float))
         P = thetas.shape[0]
         st = self.structure(cand.ringing)
+        project = project and self.fit_x0
         res = np.empty((P, 2 * self.K))
         preds = np.empty((P, self.K, 2)) if full else None
-        x0s = np.zeros((P, st.n)) if full else None
+        x0s = np.zeros((P, st.n))
         for c0 in range(0, P, _CHUNK):
             sl = slice(c0, min(P, c0 + _CHUNK))
             rl, ext = self.split(cand, thetas[sl])
@@ -423,32 +443,45 @@ class _Problem:
             over["rload"] = rl
             ss = st.state_space(over, rl.size)
             for j in range(rl.size):
-                y, free = _simulate_one(ss.A[j], ss.B[j], ss.C[j], ss.D[j], self.inp, self.h, self.fit_x0)
-                x0 = np.zeros(st.n)
-                if self.fit_x0:
-                    M = free * self.weight[None, :, None]  # (K, 2, n)
-                    r = (self.y - y) * self.weight
-                    M2 = M.reshape(2 * self.K, st.n)
+                x_init = None if (project or x0 is None) else x0
+                y, free, to_state = _simulate_one(ss.A[j], ss.B[j], ss.C[j], ss.D[j], self.inp, self.h, project,
+                                                  x_init)
+                if project:
+                    coef = np.zeros(st.n)
+                    M2 = (free * self.weight[None, :, None]).reshape(2 * self.K, st.n)
+                    r = ((self.y - y) * self.weight).ravel()
                     G = M2.T @ M2
-                    c = M2.T @ r.ravel()
+                    c = M2.T @ r
                     d = np.sqrt(np.maximum(np.diag(G), 0.0))
                     live = d > 1e-9 * max(d.max(), 1e-300)
                     if live.any():
                         Gs = G[np.ix_(live, live)] / np.outer(d[live], d[live])
                         evals, evecs = np.linalg.eigh(Gs)
                         inv = np.where(evals > 1e-12 * evals.max(), 1.0 / np.where(evals > 0, evals, 1.0), 0.0)
-                        x0[live] = (evecs @ (inv * (evecs.T @ (c[live] / d[live])))) / d[live]
-                        y = y + _small_product(free.reshape(2 * self.K, st.n), x0[:, None]).reshape(self.K, 2)
+                        coef[live] = (evecs @ (inv * (evecs.T @ (c[live] / d[live])))) / d[live]
+                        y = y + _small_product(free.reshape(2 * self.K, st.n), coef[:, None]).reshape(self.K, 2)
+                    x0s[c0 + j] = to_state @ coef
+                elif x_init is not None:
+                    x0s[c0 + j] = x_init
                 res[c0 + j] = ((y - self.y) * self.weight).ravel()
                 if full:
                     preds[c0 + j] = y
-                    x0s[c0 + j] = x0
         if full:
             return res, preds, x0s
         return res
 
-    def costs(self, cand: _Candidate, thetas: np.ndarray) -> np.ndarray:
-        return np.sum(self.evaluate(cand, thetas) ** 2, axis=1)
+    def embed_state(self, x0: np.ndarray, from_ringing: bool, to_ringing: bool) -> np.ndarray:
+        """An initial state of one structure in the state order of another (matched by state name)."""
+        a, b = self.structure(from_ringing).mna.states, self.structure(to_ringing).mna.states
+        out = np.zeros(len(b))
+        for i, name in enumerate(a):
+            if name in b:
+                out[b.index(name)] = x0[i]
+        return out
+
+    def costs(self, cand: _Candidate, thetas: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
+        """Costs of many parameter vectors with one fixed initial state (a scan)."""
+        return np.sum(self.evaluate(cand, thetas, project=False, x0=x0) ** 2, axis=1)
 
     def bounds(self, cand: _Candidate) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = list(cand.lower), list(cand.upper)
@@ -469,15 +502,18 @@ class _Problem:
             cache: dict[str, Any] = {}
 
             def fun(x):
-                e = self.evaluate(cand, x[None])[0]
-                cache["x"], cache["e"] = x.copy(), e
-                return e
+                e, _, xs = self.evaluate(cand, x[None], full=True)
+                cache["x"], cache["e"], cache["x0"] = x.copy(), e[0], xs[0]
+                return e[0]
 
             def jac(x):
-                e0 = cache["e"] if "x" in cache and np.array_equal(cache["x"], x) else fun(x)
+                if not ("x" in cache and np.array_equal(cache["x"], x)):
+                    fun(x)
+                e0, xs = cache["e"], cache["x0"]
                 steps = np.where(x + _FD_STEP <= hi, _FD_STEP, -_FD_STEP)
                 pert = x[None, :] + np.diag(steps)
-                E = self.evaluate(cand, pert)
+                # initial state held at its projection for x (its optimum): the cost gradient stays exact
+                E = self.evaluate(cand, pert, project=False, x0=xs if self.fit_x0 else None)
                 return ((E - e0[None, :]) / steps[:, None]).T
 
             sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", max_nfev=max_nfev,
@@ -541,45 +577,83 @@ def _bit_samples(u: np.ndarray) -> float:
     return float(runs.min())
 
 
-def _localise(u: np.ndarray, h: float, before: np.ndarray, after: np.ndarray | None) -> dict[str, Any]:
-    """Where in time the normalised residual energy sits: just after the edges or between them."""
+def _decimation(u: np.ndarray, per_bit: int = 200) -> tuple[int, int]:
+    """Subsampling ``(q, k0)`` that keeps every switching edge on the grid ``k0 + q j`` and at least
+    ``per_bit`` samples in the shortest bit (``q = 1``: none)."""
+    e = _edges(u)
+    if e.size < 2:
+        return 1, 0
+    g = int(np.gcd.reduce(np.diff(e)))
+    bit = int(np.min(np.diff(e)))
+    q = max([d for d in range(1, g + 1) if g % d == 0 and bit // d >= per_bit] or [1])
+    return q, int(e[0] % q)
+
+
+def _localise(u: np.ndarray, h: float, before: np.ndarray, after: np.ndarray | None,
+              ringing_share: float = 0.0, ringing_hz: float | None = None) -> dict[str, Any]:
+    """Where in time the normalised residual sits: at the edges, in the transients after them, or between.
+
+    Three windows by the time since the last switching edge: ``edge`` (the first
+    2 % of the shortest bit), ``transient`` (2-30 %) and ``steady`` (the rest).
+    The label is ``waveform edges and ringing`` when the edge window's RMS is at
+    least 1.5 times the others' or a single ringing line carries at least half of
+    the residual's power; ``steady parts between edges`` when the steady window's
+    RMS is at least 0.7 times the largest; else ``transients after the edges``.
+    """
     since = _since_edge(u, h)
     bit = _bit_samples(u) * h
-    window = max(3 * h, 0.05 * bit)
+    window = max(3 * h, 0.02 * bit)
     near = since < window
     time_share = float(np.mean(near))
+    masks = {"edge": near, "transient": (since >= window) & (since < 0.3 * bit), "steady": since >= 0.3 * bit}
 
     def share(e):
         en = np.sum(e ** 2, axis=1)
         tot = float(np.sum(en))
         return float(np.sum(en[near]) / tot) if tot > 0 else 0.0
 
-    s_before = share(before)
-    if s_before >= max(0.5, 2.5 * time_share):
+    def rms(e, m):
+        return float(np.sqrt(np.mean(np.sum(e[m] ** 2, axis=1)))) if m.any() else 0.0
+
+    r = {k: rms(before, m) for k, m in masks.items()}
+    top = max(r.values()) or 1.0
+    if ringing_share >= 0.5 or r["edge"] >= 1.5 * max(r["transient"], r["steady"]):
         where = "waveform edges and ringing"
-    elif s_before <= 1.5 * time_share:
+    elif r["steady"] >= 0.7 * top:
         where = "steady parts between edges"
     else:
-        where = "edges and steady parts alike"
+        where = "transients after the edges (source time constants)"
     edges_b = np.geomspace(max(h, bit / 1000), bit, 7)
     bounds = np.concatenate([[0.0], edges_b[1:-1], [np.inf]])
     profile = []
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        sel = (since >= a) & (since < b)
+    for lo_, hi_ in zip(bounds[:-1], bounds[1:]):
+        sel = (since >= lo_) & (since < hi_)
         if not sel.any():
             continue
-        row = {"from_s": float(a), "to_s": float(b) if np.isfinite(b) else None, "samples": int(sel.sum()),
-               "rms_before": float(np.sqrt(np.mean(np.sum(before[sel] ** 2, axis=1))))}
+        row = {"from_s": float(lo_), "to_s": float(hi_) if np.isfinite(hi_) else None, "samples": int(sel.sum()),
+               "rms_before": rms(before, sel)}
         if after is not None:
-            row["rms_after"] = float(np.sqrt(np.mean(np.sum(after[sel] ** 2, axis=1))))
+            row["rms_after"] = rms(after, sel)
         profile.append(row)
-    out = {"edge_window_s": window, "time_share_near_edges": time_share,
-           "residual_share_near_edges_before": s_before, "where": where,
+    out = {"where": where, "edge_window_s": window, "time_share_near_edges": time_share,
+           "residual_share_near_edges_before": share(before),
+           "rms_by_window_before": r,
+           "ringing_line_hz": ringing_hz, "ringing_line_share_of_residual_power": ringing_share,
            "profile_by_time_since_edge": profile,
-           "note": "residuals normalised by each signal's standard deviation; rms in those units x sqrt(K)"}
+           "note": "residual = (model - measured) / std(measured) per signal, RMS over both signals"}
     if after is not None:
         out["residual_share_near_edges_after"] = share(after)
+        out["rms_by_window_after"] = {k: rms(after, m) for k, m in masks.items()}
     return out
+
+
+def _line_share(f: np.ndarray, S: np.ndarray, fp: float | None) -> float:
+    """Share of the residual power within +-0.5 % of the frequency ``fp``."""
+    if not fp:
+        return 0.0
+    tot = float(np.sum(S[1:]))
+    sel = np.abs(f - fp) <= max(0.005 * fp, 3 * (f[1] - f[0]))
+    return float(np.sum(S[sel]) / tot) if tot > 0 else 0.0
 
 
 def _residual_spectrum(e: np.ndarray, h: float, pad: int = 4) -> tuple[np.ndarray, np.ndarray]:
@@ -783,17 +857,38 @@ def diagnose_waveforms(
     fclk = 1.0 / bit_s
     fmin_ring, fmax_ring = _RING_MIN_FCLK * fclk, _RING_MAX_FS / h
 
+    # fits of the slow effects on a subsampled record (exact: the edges stay on its grid), polished on all samples
+    q, k0 = _decimation(u)
+    fast = prob
+    if q > 1:
+        ws = Waveforms(w.time_s[k0::q], u[k0::q], w.v_in[k0::q], w.i_in[k0::q])
+        fast = _Problem(ws, nominal, u[k0::q], r_load, (float(rsnub), float(csnub)), fit_initial_state)
+        _log(f"slow effects fitted on every {q}th sample, then refined on all {K}", progress)
+
+    def two_stage(cand: _Candidate, starts: list[np.ndarray], max_nfev: int = 60) -> WaveformFit:
+        if fast is prob:
+            return prob.fit(cand, starts, max_nfev)
+        first = fast.fit(cand, starts, max_nfev)
+        return prob.fit(cand, [first.theta], max_nfev=6)
+
     # ---- baseline
     base_c = _Candidate("none", (), (), ())
-    baseline = prob.fit(base_c, [prob.start(base_c, [])], max_nfev=40)
+    baseline = two_stage(base_c, [prob.start(base_c, [])], max_nfev=40)
     _log(f"baseline fitted: cost {baseline.cost:.4g} (R_load {baseline.values['r_load']:.4g} Ohm) "
          f"in {baseline.wall_s:.1f} s", progress)
     worst = max(baseline.cost_per_signal.values())
+    r_direct = prob.r_load0 if r_load is None else float(np.dot(w.v_in, w.i_in) / np.dot(w.i_in, w.i_in))
+    mismatch = abs(baseline.values["r_load"] / r_direct - 1)
+    if worst <= MAX_BASELINE_NMSE and mismatch > MAX_LOAD_MISMATCH:
+        raise DiagnosisError(
+            f"the baseline does not fit the data at all (fitted load {baseline.values['r_load']:.4g} Ohm against "
+            f"v_in/i_in = {r_direct:.4g} Ohm); check the nominal R, L, C, the units and the columns")
     if worst > MAX_BASELINE_NMSE:
         bad = max(baseline.cost_per_signal, key=baseline.cost_per_signal.get)
         raise DiagnosisError(
             f"the baseline does not fit the data at all ({bad}: residual RMS {100 * math.sqrt(worst):.0f} % of the "
-            f"signal's standard deviation after fitting the load); check the nominal R, L, C, the units and the columns")
+            f"signal's standard deviation after fitting the load); "
+            "check the nominal R, L, C, the units and the columns")
     e_base = np.stack([(baseline.predicted[s] - getattr(w, s)) / prob.sigma[j] for j, s in enumerate(SIGNALS)], axis=1)
     f_grid, S = _residual_spectrum(e_base, h)
 
@@ -804,15 +899,15 @@ def diagnose_waveforms(
         t = time.perf_counter()
         head = list(rl0)
         if cand.cause == "series-resistance":
-            res = prob.fit(cand, [np.array(head + [0.0]), np.array(head + [math.log(1.2)])])
+            res = two_stage(cand, [np.array(head + [0.0]), np.array(head + [math.log(1.2)])])
         elif cand.cause == "component-drift":
-            res = prob.fit(cand, [np.array(head + [0.0, 0.0]), np.array(head + [math.log(1.2), math.log(0.8)]),
+            res = two_stage(cand, [np.array(head + [0.0, 0.0]), np.array(head + [math.log(1.2), math.log(0.8)]),
                                   np.array(head + [math.log(0.8), math.log(1.2)])])
         else:
-            res = _fit_ringing(prob, cand, head, f_grid, S, fmin_ring, fmax_ring, progress)
+            res = _fit_ringing(prob, cand, head, f_grid, S, fmin_ring, fmax_ring, baseline, progress)
         res.wall_s = time.perf_counter() - t
         results.append(res)
-        _log(f"{cand.cause}: cost {res.cost:.4g}, gain {1 - res.cost / baseline.cost:.3f}, "
+        _log(f"{cand.cause}: cost {res.cost:.4g}, gain {1 - res.cost / baseline.cost:.3f}, nfev {res.nfev}, "
              f"dBIC {baseline.bic - res.bic:.1f} ({res.wall_s:.1f} s)", progress)
 
     # ---- selection
@@ -840,7 +935,8 @@ def diagnose_waveforms(
         "r_load_ohm": {"baseline": baseline.values["r_load"], "extended": diag.extended.values["r_load"],
                        "given": r_load},
         "residual_rms": rms,
-        "localisation": _localise(u, h, e_base / math.sqrt(K), None if e_after is None else e_after / math.sqrt(K)),
+        "localisation": _localise(u, h, e_base, e_after, _line_share(f_grid, S, peak[0] if peak else None),
+                                  peak[0] if peak else None),
         "residual_spectrum_peak_hz": peak[0] if peak else None,
         "ringing_search_band_hz": [fmin_ring, fmax_ring] if fmax_ring > 1.2 * fmin_ring else None,
         "gain_per_signal": ({s: 1 - chosen.cost_per_signal[s] / baseline.cost_per_signal[s] for s in SIGNALS}
@@ -870,31 +966,36 @@ def _ringing_evidence(fit: WaveformFit) -> dict[str, Any]:
 
 
 def _fit_ringing(prob: _Problem, cand: _Candidate, head: list[float], f_grid: np.ndarray, S: np.ndarray,
-                 fmin: float, fmax: float, progress: bool) -> WaveformFit:
+                 fmin: float, fmax: float, baseline: WaveformFit, progress: bool) -> WaveformFit:
     """Ringing extension: starting frequencies from the residual spectrum and a cost scan, then least squares."""
     T = prob.K * prob.h
+    t0 = time.perf_counter()
     z0s = [30.0, 150.0, 750.0]
     trials: list[np.ndarray] = []
     # fine scans (+-2 FFT bins of the unpadded record) around the residual's spectral peaks
-    for fp in _spectral_peaks(f_grid, S, fmin, fmax, 3):
-        for fq in fp + np.linspace(-4.0, 4.0, 33) / T:
+    for fp in _spectral_peaks(f_grid, S, fmin, fmax, 2):
+        for fq in fp + np.linspace(-3.0, 3.0, 25) / T:
             if fmin < fq < fmax:
                 trials.append(np.array(head + [math.log(fq), math.log(z0s[1])]))
     # coarse log scan for heavily damped ringing
-    for fq in np.geomspace(fmin * 1.05, fmax * 0.95, 24):
+    for fq in np.geomspace(fmin * 1.05, fmax * 0.95, 20):
         for z in z0s:
             trials.append(np.array(head + [math.log(fq), math.log(z)]))
-    costs = prob.costs(cand, np.array(trials))
+    x0 = prob.embed_state(baseline.x0, False, True) if prob.fit_x0 else None
+    costs = prob.costs(cand, np.array(trials), x0)
     order = np.argsort(costs)
     picked: list[np.ndarray] = []
     for i in order:
         if all(abs(trials[i][-2] - p[-2]) > 0.02 or abs(trials[i][-1] - p[-1]) > 0.5 for p in picked):
             picked.append(trials[i])
-        if len(picked) >= 3:
+        if len(picked) >= 2:
             break
-    _log(f"switch-ringing: {len(trials)} scan points, starts at "
+    if costs[order[0]] >= baseline.cost:  # no ringing frequency in the band helps: a short refinement only
+        _log(f"switch-ringing: no scan point ({len(trials)}) beats the baseline; short refinement", progress)
+        return prob.fit(cand, picked[:1], max_nfev=8)
+    _log(f"switch-ringing: {len(trials)} scan points in {time.perf_counter() - t0:.1f} s, starts at "
          f"{', '.join(f'{math.exp(p[-2]) / 1e6:.4g} MHz' for p in picked)}", progress)
-    return prob.fit(cand, picked, max_nfev=40)
+    return prob.fit(cand, picked, max_nfev=30)
 
 
 # ---------------------------------------------------------------------------
@@ -984,7 +1085,8 @@ def write_report(diagnosis: WaveformDiagnosis, directory: str | os.PathLike) -> 
                   f"{_fmt(r['f_ring_hz'], 'Hz')} ({r['relation']})."]
         if "f_ring_snubbed_hz" in r:
             lines[-1] += f" With the snubber: {_fmt(r['f_ring_snubbed_hz'], 'Hz')}."
-        lines[-1] += f" A snubber resistance of about {_fmt(r['optimal_snubber_r_ohm'], 'Ohm')} would damp it."
+        lines[-1] += (f" Optimal damping resistance of an RC snubber (thesis: R_s = sqrt(L_p / C_p) / 2): "
+                      f"{_fmt(r['optimal_snubber_r_ohm'], 'Ohm')}.")
     lines += ["", "## Figures", ""] + [f"![{name}]({name})" for name in figs] + [""]
     path = out / "report.md"
     path.write_text("\n".join(lines), encoding="utf-8")
@@ -1007,8 +1109,9 @@ def _plots(d: WaveformDiagnosis, out: Path) -> list[str]:
     e0 = int(edges[int(np.argmax(scores))]) if edges.size else 0
     ext = d.extended
     f_ring = d.best.extra.get("f_ring_observed_hz") if d.best is not None else None
-    short = int(round(12 / f_ring / h)) if f_ring else max(bit // 8, 10)
-    windows = [(max(0, e0 - bit // 10), min(t.size, e0 + bit)), (max(0, e0 - max(short // 8, 2)), min(t.size, e0 + short))]
+    short = max(int(round(5 / f_ring / h)), 20) if f_ring else max(bit // 8, 20)
+    windows = [(max(0, e0 - bit // 10), min(t.size, e0 + bit)),
+               (max(0, e0 - max(short // 8, 2)), min(t.size, e0 + short))]
     names = []
     fig, axes = plt.subplots(2, 2, figsize=(11, 6.5), squeeze=False)
     for col, (a, b) in enumerate(windows):

@@ -1,0 +1,10 @@
+"""The thesis's estimation studies, reproduced end to end.
+
+- :mod:`estimation.studies.two_section` -- thesis 4.1.2-4.1.4 (Table 4.5, case studies 1-5);
+- :mod:`estimation.studies.three_section` -- thesis 4.2.2-4.2.6 (Tables 4.9, 4.10, Figs. 4.19-4.22);
+- :mod:`estimation.studies.common` -- rows, identifiability, the resumable study driver.
+
+Run them with ``pris-cosim study NAME [--quick]`` (see :mod:`estimation.cli`).
+"""
+
+STUDIES = ("two-section", "three-section")

@@ -126,6 +126,8 @@ F_MIN, F_MAX, N_POINTS = 20.0, 9e3, 200
 PERIODIC_ORDER = 10
 F_BAND_5 = (10.0, 9.5e3)
 COHERENCE_MIN = 0.999
+#: Cases 1-4, global phase: analytic estimate against the target's coherent bins only.
+COHERENCE_GUIDE = 0.99
 INPUT_PSD_MIN = 1e-6
 
 
@@ -167,7 +169,10 @@ def simulated_target(spec: dict[str, Any], names: Sequence[str]) -> tuple[dict[s
     w = {k: v[:n] for k, v in w.items()}
     specs = [ap.TWO_SECTION_SPECS[r] for r in names]
     _, resp, _ = ap.responses_from_waveforms(w, spec["fs"], specs, welch, bins)
-    return resp, f, (n, welch, bins)
+    # coherence with quarter-record segments: low near the sharp resonances, where leakage biases H1
+    f_c, _, coh = ap.responses_from_waveforms(w, spec["fs"], specs, ap.WelchSettings(nperseg=n // 4))
+    coherent = {r: np.interp(f, f_c, coh[r]) >= COHERENCE_GUIDE for r in names}
+    return resp, f, (n, welch, bins, coherent)
 
 
 def periodic_target(names: Sequence[str], fs: float = 300e3, duration: float = 0.3,
@@ -210,11 +215,13 @@ def build_approach(case: str, quick: bool = True) -> tuple[ap.Approach, Paramete
         approach: ap.Approach = ap.AnalyticFrequency(params, model.response_set(), f, target, cost)
         info = {"target": "simulated PRIS, periodic record (see module docstring)", **info}
     else:
-        target, f, (n, welch, bins) = simulated_target(spec, names)
+        target, f, (n, welch, bins, coherent) = simulated_target(spec, names)
         engine = ap.PrisEngine(model.circuit, PORT, SOURCE, spec["fs"], n)
         approach = ap.SimulatedFrequency(params, engine, [ap.TWO_SECTION_SPECS[r] for r in names], welch, bins,
                                          target, cost)
+        approach.coherent = coherent  # type: ignore[attr-defined]
         info = {"target": "simulated PRIS, Welch H1 (Hann, 62.5 %, half record)", "samples": n,
+                "coherent_points": {r: int(m.sum()) for r, m in coherent.items()},
                 "bin_hz": spec["fs"] / welch.segment(n), "points": int(f.size)}
     info.update({"fs_hz": spec["fs"], "duration_s": spec["duration"], "responses": names,
                  "f_min_hz": float(f.min()), "f_max_hz": float(f.max())})
@@ -223,12 +230,13 @@ def build_approach(case: str, quick: bool = True) -> tuple[ap.Approach, Paramete
 
 def optimiser_settings(case: str, quick: bool) -> dict[str, Any]:
     """Optimiser plan of a case (see :func:`run_case`)."""
-    ga = {"pop_size": 100 if quick else 300, "max_generations": 120 if quick else 300}
-    plan: dict[str, Any] = {"global": "ga+local", "global_options": {"global_options": ga},
-                            "global_budget": Budget(max_evals=30000 if quick else 200000, max_time_s=120 if quick else None)}
+    ga = {"pop_size": 200 if quick else 400, "max_generations": 200 if quick else 400}
+    plan: dict[str, Any] = {"global": "ga+local", "global_options": {"global_options": ga}, "restarts": 3 if quick else 5,
+                            "global_budget": Budget(max_evals=50000 if quick else 200000, max_time_s=60 if quick else None)}
     if CASES[case]["estimate"] == "simulated":
-        plan["polish"] = "local"
-        plan["polish_budget"] = Budget(max_evals=500 if quick else 3000, max_time_s=150 if quick else None)
+        plan["restarts"] = 2 if quick else 4
+        plan["polish_iterations"] = 40 if quick else 100
+        plan["polish_time_s"] = 150 if quick else None
     return plan
 
 
@@ -240,31 +248,52 @@ def run_case(case: str, quick: bool = True, seed: int = 1) -> dict[str, Any]:
     plan = optimiser_settings(case, quick)
     model = get_model(NAME)
     if CASES[case]["estimate"] == "simulated":
-        # global phase on the analytic responses against the same (Welch) target, then the
-        # simulated-in-the-loop approach polishes locally from there (its cost is exactly zero at the target)
+        # global phase: GA restarts on the analytic responses against the target's coherent bins
+        # (where Welch H1 of the record equals the analytic response to 0.01 decades); then the
+        # simulated-in-the-loop approach polishes by least squares over all bins (its cost is zero at the target)
         proxy = ap.AnalyticFrequency(params, model.response_set(), approach.bins * approach.sim.fs
-                                     / approach.welch.segment(approach.sim.n_samples), approach.target, approach.cost)
-        first, rec = common.optimise(proxy, plan["global"], seed, plan["global_budget"], plan["global_options"])
-        res, rec2 = common.optimise(approach, plan["polish"], seed, plan["polish_budget"], {}, x0=first.x)
-        optimiser = "ga+local(analytic) -> local(simulated)"
+                                     / approach.welch.segment(approach.sim.n_samples), approach.target,
+                                     ap.frequency_cost("sse", list(approach.target), approach.coherent))
+        first, rec = None, None
+        for k in range(plan["restarts"]):
+            r_k, rec_k = common.optimise(proxy, plan["global"], seed + k, plan["global_budget"], plan["global_options"])
+            if first is None or r_k.fun < first.fun:
+                first, rec = r_k, rec_k
+        t1 = time.perf_counter()
+        res = common.PolishResult(**common.least_squares_polish(approach, first.x, max_nfev=plan["polish_iterations"],
+                                                                max_time_s=plan["polish_time_s"]))
+        res.wall_s = time.perf_counter() - t1
+        optimiser = f"ga+local (best of {plan['restarts']}, analytic, coherent bins) -> least-squares(simulated)"
         stages = {"global": {"fun": first.fun, "nfev": first.nfev, "wall_s": first.wall_s,
                              "per_eval_s": proxy.stats.per_eval_s, "engine": proxy.engine},
                   "polish": {"fun": res.fun, "nfev": res.nfev, "wall_s": res.wall_s,
                              "per_eval_s": approach.stats.per_eval_s, "engine": approach.engine}}
         ident_approach = approach
+        proxy_or_none = None
     else:
-        res, rec = common.optimise(approach, plan["global"], seed, plan["global_budget"], plan["global_options"])
-        optimiser = "ga+local"
-        stages = {"global": {"fun": res.fun, "nfev": res.nfev, "wall_s": res.wall_s,
-                             "per_eval_s": approach.stats.per_eval_s, "engine": approach.engine}}
+        # independent GA restarts (seeds seed, seed+1, ...), best kept: the analytic cost is cheap and rugged
+        first, rec = None, None
+        for k in range(plan["restarts"]):
+            r_k, rec_k = common.optimise(approach, plan["global"], seed + k, plan["global_budget"], plan["global_options"])
+            if first is None or r_k.fun < first.fun:
+                first, rec = r_k, rec_k
+        res = common.PolishResult(**common.least_squares_polish(approach, first.x, max_nfev=60))
+        optimiser = f"ga+local (best of {plan['restarts']}) -> least-squares"
+        stages = {"global": {"fun": first.fun, "nfev": first.nfev, "wall_s": first.wall_s,
+                             "per_eval_s": approach.stats.per_eval_s, "engine": approach.engine},
+                  "polish": {"fun": res.fun, "nfev": res.nfev}}
         ident_approach = approach
+        proxy_or_none = approach
     values = params.values(res.x)
     est = {k: float(values[k]) for k in params.varying}
     # identifiability
     U, f = rec.arrays()
     finite = f[np.isfinite(f)]
     scale = float(np.median(finite)) if finite.size else 1.0
-    minima, differing = common.equal_cost_minima(U, f, params, res.fun, scale)
+    if ident_approach is proxy_or_none:
+        minima, differing = common.equal_cost_minima(U, f, params, float(np.min(f)) if f.size else res.fun, scale)
+    else:  # the record holds the global phase's stand-in cost, not the estimate's: its minima prove nothing
+        minima, differing = [], []
     swaps = common.swap_symmetries(ident_approach.cost_batch, params, res.x, res.fun, scale)
     jac = common.jacobian_identifiability(ident_approach.residuals, params, res.x)
     flagged = set(differing) | {n for a, b, _ in swaps for n in (a, b)} | set(jac["non_identifiable"])
@@ -290,7 +319,7 @@ def run_case(case: str, quick: bool = True, seed: int = 1) -> dict[str, Any]:
         "cost": float(res.fun),
         "wall_s": time.perf_counter() - t0,
         "setup_s": t_setup,
-        "nfev": int(res.nfev),
+        "nfev": int(sum(st["nfev"] for st in stages.values())),
         "per_eval_s": approach.stats.per_eval_s,
         "optimiser_message": res.message,
         "stages": stages,
@@ -353,3 +382,21 @@ def run(quick: bool = True, out: str | None = None, scheduler: str | None = None
     if progress:
         common.say(table)
     return summary
+
+
+def run_demo(seed: int = 1, pop: int = 30, generations: int = 15) -> dict[str, Any]:
+    """A tiny two-section estimation (analytic target and estimate, Zin + R2in, small GA): for tests and demos."""
+    t0 = time.perf_counter()
+    params = make_params()
+    model = get_model(NAME)
+    f = np.logspace(np.log10(20.0), np.log10(9e3), 100)
+    names = RESPONSE_SETS["B"]
+    target = {k: v for k, v in model.response_set().evaluate(f, _target_overrides()).items() if k in names}
+    a = ap.AnalyticFrequency(params, model.response_set(), f, target, ap.frequency_cost("sse", names))
+    res, _ = common.optimise(a, "ga", seed, Budget(max_evals=pop * (generations + 1)),
+                             {"pop_size": pop, "max_generations": generations})
+    vals = params.values(res.x)
+    est = {REPORT[k]: float(vals[k]) for k in params.varying}
+    return {"case": "demo", "approach": "frequency", "optimiser": "ga", "cost_function": "sse",
+            "errors_percent": common.errors_percent(est, {REPORT[k]: v for k, v in TARGET.items()}),
+            "non_identifiable": [], "cost": float(res.fun), "wall_s": time.perf_counter() - t0, "seed": seed}

@@ -1,0 +1,317 @@
+"""Command-line commands of the estimation package: ``study`` and ``estimate``.
+
+Registered with the ``pris-cosim`` console script through the entry-point
+group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
+:func:`register` adds both sub-commands.
+
+``pris-cosim study NAME [--quick] [--json] [--out DIR] [--scheduler ADDR] [--workers N] [--seed N]``
+    Runs the thesis's estimation study NAME (``two-section``,
+    ``three-section``) through :func:`estimation.executor.run_tasks`: local
+    processes by default, ``--scheduler serial`` in this process, or a Dask
+    scheduler ``tcp://host:port``. Every finished run is written at once to
+    ``DIR/runs/<id>.json`` and ``DIR/results.csv``; running again resumes
+    (stored runs are not repeated). ``DIR/study.json`` holds the answer,
+    figures go beside it. Default ``DIR``: ``study-<name>[-quick]``.
+    With ``--json`` one JSON object goes to stdout (``rows``: ``case``,
+    ``approach``, ``optimiser``, ``cost_function``, ``errors_percent``,
+    ``non_identifiable``, ``cost``, ``wall_s`` ...; ``thesis``: the thesis's
+    numbers; ``checks``); otherwise the comparison table. Progress on stderr.
+
+``pris-cosim estimate --config FILE.json [--json]``
+    One estimation described by a JSON file::
+
+        {
+          "model": "two-section",                 # built-in model (pris-cosim models)
+          "parameters": {                         # estimated parameters (default: all free ones)
+            "R1": {"min": 1, "max": 100},         #   SI bounds; or {"factor": 10}; "scale": "log"|"linear"
+            "C1": {}, "L1": {}, "L2": {}, "K12": {"min": 0, "max": 0.99997}
+          },
+          "ties": {"R2": "R1", "C2": "C1"},       # optional: tied parameters
+          "target": {                             # what the estimate is fitted to
+            "kind": "simulated",                  #   "simulated": the model itself with "values" (default: its own)
+            "values": {"R1": 10},                 #   "responses-csv": measured responses, "path": FILE.csv
+            "method": "analytic"                  #   (interfaces CSV); "waveforms-csv": "path" (time/emd/iemd)
+          },                                      #   simulated targets: "method" "analytic" or "pris" (Welch H1)
+          "approach": "frequency",                # "frequency" (analytic estimate), "frequency-simulated",
+                                                  # "time", "emd", "iemd"
+          "responses": ["Zin"],                   # frequency approaches; names of the configuration
+          "frequency": {"fmin": 20, "fmax": 9000, "points": 200},
+          "source": {"vdc": 30, "prbs_order": 12, "fclk": 1e4, "rpris": 31800, "lpris": 2.53, "cpris": 1e-8},
+          "fs": 300000, "duration": 0.3,          # simulated perturbation: sampling rate (Hz), record (s)
+          "cost": "sse",                          # "sse" (4.21), "rmse" (4.29/4.32/4.39/4.45), "correlation"
+          "optimiser": "ga+local",                # any estimation.optimisers.minimize method
+          "options": {},                          # its options
+          "budget": {"max_evals": 20000, "max_time_s": 60},
+          "seed": 1
+        }
+
+    Answer (``--json``): ``estimate``, ``errors_percent`` (for a simulated
+    target with known values), ``cost``, ``engine``, ``per_eval_s``,
+    ``nfev``, ``wall_s``, ``message``.
+
+Bad input raises :class:`EstimationInputError` (a ``ValueError``): the main
+CLI prints one line and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .executor import to_jsonable
+
+STUDIES = ("two-section", "three-section")
+
+
+class EstimationInputError(ValueError):
+    """Bad input for ``study`` or ``estimate`` (one line)."""
+
+
+def _finite(obj: Any) -> Any:
+    """JSON-ready copy with non-finite floats as None (strict JSON has no NaN/Infinity)."""
+    obj = to_jsonable(obj)
+    if isinstance(obj, float):
+        return obj if np.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def emit(obj: Any) -> None:
+    """Exactly one JSON object on stdout."""
+    sys.stdout.write(json.dumps(_finite(obj), allow_nan=False) + "\n")
+
+
+# ====================================================================== study
+def run_study_command(name: str, quick: bool = False, out: str | None = None, scheduler: str | None = None,
+                      workers: int | None = None, seed: int = 1, progress: bool = True) -> dict[str, Any]:
+    """Run a study by name; the dictionary that ``--json`` prints."""
+    if name not in STUDIES:
+        raise EstimationInputError(f"unknown study {name!r} (choose from {', '.join(STUDIES)})")
+    if workers is not None and workers < 1:
+        raise EstimationInputError(f"--workers must be at least 1 (got {workers})")
+    if scheduler is not None and scheduler not in ("processes", "serial") and "://" not in scheduler:
+        raise EstimationInputError(f"--scheduler must be 'processes', 'serial' or an address tcp://host:port (got {scheduler!r})")
+    out = out or f"study-{name}{'-quick' if quick else ''}"
+    if name == "two-section":
+        from .studies import two_section as mod
+    else:
+        from .studies import three_section as mod  # type: ignore[no-redef]
+    return mod.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed, progress=progress)
+
+
+def cmd_study(args: argparse.Namespace) -> int:
+    summary = run_study_command(args.name, args.quick, args.out, args.scheduler, args.workers, args.seed)
+    if args.json:
+        emit(summary)
+    else:
+        print(summary["table"])
+        if summary.get("checks"):
+            print("checks: " + ", ".join(f"{k}={'ok' if v else 'FAILED'}" for k, v in summary["checks"].items()))
+        print(f"results in {summary['out']} ({summary['wall_s']:.1f} s)")
+    return 0
+
+
+# ====================================================================== estimate
+def _need(cfg: dict[str, Any], key: str, kind: type | tuple[type, ...], default: Any = None) -> Any:
+    value = cfg.get(key, default)
+    if value is not None and not isinstance(value, kind):
+        raise EstimationInputError(f"config key {key!r} has the wrong type ({type(value).__name__})")
+    return value
+
+
+def load_config(path: str | Path) -> dict[str, Any]:
+    """Read and check the JSON configuration of ``estimate``."""
+    try:
+        cfg = json.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise EstimationInputError(f"cannot read config {path}: {exc.strerror or exc}") from None
+    except ValueError as exc:
+        raise EstimationInputError(f"config {path} is not valid JSON: {exc}") from None
+    if not isinstance(cfg, dict):
+        raise EstimationInputError(f"config {path} must hold a JSON object")
+    known = {"model", "parameters", "ties", "target", "approach", "responses", "frequency", "source", "fs",
+             "duration", "cost", "optimiser", "options", "budget", "seed", "configuration"}
+    unknown = sorted(set(cfg) - known)
+    if unknown:
+        raise EstimationInputError(f"config key {unknown[0]!r} is not known (known: {', '.join(sorted(known))})")
+    return cfg
+
+
+def _parameter_set(model: Any, cfg: dict[str, Any]) -> Any:
+    from .parameters import ParameterSet
+
+    spec = _need(cfg, "parameters", dict, {})
+    ties = _need(cfg, "ties", dict, {})
+    names = list(spec) + [t for t in ties if t not in spec] if spec else None
+    bounds = {}
+    for k, v in spec.items():
+        if not isinstance(v, dict):
+            raise EstimationInputError(f"parameter {k!r}: give an object such as {{\"min\": 1, \"max\": 10}}")
+        if "min" in v or "max" in v:
+            if not ("min" in v and "max" in v):
+                raise EstimationInputError(f"parameter {k!r}: give both 'min' and 'max'")
+            bounds[k] = (float(v["min"]), float(v["max"]))
+        elif "factor" in v:
+            bounds[k] = float(v["factor"])
+    try:
+        ps = ParameterSet.from_model(model, names=names, bounds=bounds or None, ties=ties or None)
+        for k, v in spec.items():
+            if "scale" in v:
+                ps.set(k, scale=v["scale"])
+    except (ValueError, KeyError) as exc:
+        raise EstimationInputError(str(exc).strip("'\"")) from None
+    return ps
+
+
+def run_estimate(cfg: dict[str, Any], progress: bool = True) -> dict[str, Any]:
+    """One estimation from a configuration dictionary (see the module docstring)."""
+    from pris_cosim import spectral, timedomain as td
+    from pris_cosim.arrangement import SourceSettings
+    from pris_cosim.measured import read_response_csv, read_waveform_csv
+    from pris_cosim.models import get_model
+
+    from . import approaches as ap
+    from .optimisers import Budget, minimize
+
+    t0 = time.perf_counter()
+    try:
+        model = get_model(_need(cfg, "model", str, "two-section"))
+    except Exception as exc:  # CircuitError is a ValueError
+        raise EstimationInputError(str(exc)) from None
+    conf = model.configuration(_need(cfg, "configuration", str, "default")) if "configuration" in cfg \
+        else next(iter(model.configurations.values()))
+    params = _parameter_set(model, cfg)
+    approach_name = _need(cfg, "approach", str, "frequency")
+    responses = _need(cfg, "responses", list, [r.name for r in conf.responses][:1])
+    metric = _need(cfg, "cost", str, "sse" if approach_name.startswith("frequency") else "rmse")
+    tgt = _need(cfg, "target", dict, {"kind": "simulated"})
+    kind = tgt.get("kind", "simulated")
+    values = dict(tgt.get("values", {}))
+    source_cfg = _need(cfg, "source", dict, {})
+    try:
+        source = SourceSettings(**source_cfg)
+    except TypeError as exc:
+        raise EstimationInputError(f"source: {exc}") from None
+    fs = float(_need(cfg, "fs", (int, float), 300e3))
+    duration = float(_need(cfg, "duration", (int, float), 0.3))
+    fr = _need(cfg, "frequency", dict, {})
+    fmin, fmax, points = float(fr.get("fmin", 20.0)), float(fr.get("fmax", 9e3)), int(fr.get("points", 200))
+    circuit = model.circuit
+    known_target: dict[str, float] | None = None
+    if kind == "simulated":
+        base = circuit.resolve(check=False)
+        base.update(circuit.parameter_values())
+        known_target = {}
+        for p in params.varying:
+            known_target[p] = float(values.get(p, base.get(p.lower(), params[p].value)))
+    if approach_name in ("frequency", "frequency-simulated"):
+        cost = ap.frequency_cost(metric, responses)
+        if kind == "responses-csv":
+            data = read_response_csv(tgt["path"])
+            f = data.frequency_hz
+            sel = (f >= fmin) & (f <= fmax)
+            missing = [r for r in responses if r not in data.responses]
+            if missing:
+                raise EstimationInputError(f"response {missing[0]!r} is not in {tgt['path']}")
+            target = {r: data.responses[r][sel] for r in responses}
+            f = f[sel]
+            if approach_name != "frequency":
+                raise EstimationInputError("a measured response target needs approach 'frequency'")
+            approach: ap.Approach = ap.AnalyticFrequency(params, model.response_set([conf.name]), f, target, cost)
+        elif kind == "simulated":
+            specs = [ap.TWO_SECTION_SPECS.get(r, ap.ResponseSpec(r, "i_in", "v_in")) for r in responses]
+            method = tgt.get("method", "analytic" if approach_name == "frequency" else "pris")
+            if method == "analytic":
+                f = np.logspace(np.log10(fmin), np.log10(fmax), points)
+                target = {k: v[0] if v.ndim > 1 else v for k, v in
+                          model.response_set([conf.name]).evaluate(f, values or None).items() if k in responses}
+                if approach_name != "frequency":
+                    raise EstimationInputError("approach 'frequency-simulated' needs a target with method 'pris'")
+                approach = ap.AnalyticFrequency(params, model.response_set([conf.name]), f, target, cost)
+            else:
+                n = int(round(fs * duration))
+                welch = ap.WelchSettings()
+                bins, f = ap.bin_frequencies(fs, welch.segment(n), fmin, fmax, points)
+                periods = -(-int(round(duration * source.fclk)) // (2 ** source.prbs_order - 1))
+                w = td.simulate_pris(circuit, conf.port, source, fs, periods=periods, overrides=values or None)
+                w = {k: v[:n] for k, v in w.items()}
+                _, target, _ = ap.responses_from_waveforms(w, fs, specs, welch, bins)
+                if approach_name == "frequency":
+                    approach = ap.AnalyticFrequency(params, model.response_set([conf.name]), f, target, cost)
+                else:
+                    eng = ap.PrisEngine(circuit, conf.port, source, fs, n)
+                    approach = ap.SimulatedFrequency(params, eng, specs, welch, bins, target, cost)
+        else:
+            raise EstimationInputError(f"target kind {kind!r} does not suit approach {approach_name!r}")
+    elif approach_name in ("time", "emd", "iemd"):
+        if kind == "waveforms-csv":
+            wf = read_waveform_csv(tgt["path"])
+            i_in, v_in = wf.i_in, wf.v_in
+            fs = 1.0 / float(np.mean(np.diff(wf.time_s)))
+        elif kind == "simulated":
+            periods = max(1, -(-int(round(duration * source.fclk)) // (2 ** source.prbs_order - 1)))
+            w = td.simulate_pris(circuit, conf.port, source, fs, periods=periods, overrides=values or None)
+            n = min(w["time_s"].size, int(round(fs * duration)))
+            i_in, v_in = w["i_in"][:n], w["v_in"][:n]
+        else:
+            raise EstimationInputError(f"target kind {kind!r} does not suit approach {approach_name!r}")
+        eng = ap.InjectionEngine(circuit, conf.port, i_in, fs)
+        cls = {"time": ap.TimeDomain, "emd": ap.EMDApproach, "iemd": ap.IEMDApproach}[approach_name]
+        approach = cls(params, eng, v_in, "rmse" if metric in ("rmse", "nrmse", "sse") else "correlation")
+    else:
+        raise EstimationInputError(f"approach must be frequency, frequency-simulated, time, emd or iemd (got {approach_name!r})")
+    b = _need(cfg, "budget", dict, {"max_evals": 20000})
+    try:
+        budget = Budget(max_evals=b.get("max_evals"), max_time_s=b.get("max_time_s"))
+        res = minimize(approach.cost_batch, approach.n, method=_need(cfg, "optimiser", str, "ga+local"),
+                       seed=int(_need(cfg, "seed", int, 1)), budget=budget, options=_need(cfg, "options", dict, {}))
+    except ValueError as exc:
+        raise EstimationInputError(str(exc)) from None
+    vals = params.values(res.x)
+    est = {k: float(vals[k]) for k in params.varying}
+    out = {"model": model.name, "approach": approach_name, "engine": approach.engine, "cost_function": metric,
+           "estimate": est, "cost": float(res.fun), "nfev": int(res.nfev), "per_eval_s": approach.stats.per_eval_s,
+           "message": res.message, "wall_s": time.perf_counter() - t0}
+    if known_target is not None:
+        out["target"] = known_target
+        out["errors_percent"] = {k: (est[k] - known_target[k]) / known_target[k] * 100 for k in est
+                                 if known_target[k] != 0}
+    return out
+
+
+def cmd_estimate(args: argparse.Namespace) -> int:
+    out = run_estimate(load_config(args.config))
+    if args.json:
+        emit(out)
+    else:
+        for k, v in out["estimate"].items():
+            e = out.get("errors_percent", {}).get(k)
+            print(f"{k:>8} {v:14.6g}" + (f"  {e:+9.3f} %" if e is not None else ""))
+        print(f"cost {out['cost']:.6g}, {out['nfev']} evaluations, {out['wall_s']:.1f} s ({out['engine']})")
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add ``study`` and ``estimate`` to the ``pris-cosim`` sub-commands."""
+    p = subparsers.add_parser("study", help="run a thesis estimation study (two-section, three-section)")
+    p.add_argument("name", help=f"study: {', '.join(STUDIES)}")
+    p.add_argument("--quick", action="store_true", help="reduced budgets (minutes), same conclusions")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.add_argument("--out", metavar="DIR", help="results directory (default study-NAME[-quick]); reruns resume")
+    p.add_argument("--scheduler", metavar="ADDR", help="'processes' (default), 'serial' or a Dask address tcp://host:port")
+    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: CPU count)")
+    p.add_argument("--seed", type=int, default=1, help="optimiser seed (default 1)")
+    p.set_defaults(func=cmd_study)
+    q = subparsers.add_parser("estimate", help="one estimation from a JSON configuration")
+    q.add_argument("--config", required=True, metavar="FILE.json")
+    q.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    q.set_defaults(func=cmd_estimate)
