@@ -9,6 +9,9 @@
   inter-winding capacitance Cab2 at the HV terminal (Table 5.6) or both
   inter-winding capacitances at symmetric HV taps (Table 5.9).
 - ``hv-6section``: Case Study 3, Table 5.12 (NOT passive: kept to be detected).
+- ``hv-6section-passive``: six sections re-estimated by this project so that
+  the inductance matrix is positive definite while the six responses of
+  Table 5.12 are reproduced (10 Hz - 10 kHz, within 1.1 dB).
 
 Two-winding models expose the six test configurations LVOC, LVSC, HVOC,
 HVSC, LVHV, HVLV of thesis 5.1.2-5.1.3.
@@ -352,6 +355,63 @@ _TABLE_5_12 = dict(
 )
 
 
+# Re-estimated by this project (not a thesis table): six sections, positive-definite inductance
+# matrix, fitted to the six responses of Table 5.12 over 10 Hz - 10 kHz (RMS 0.15-0.24 dB, max 1.0 dB).
+_PASSIVE_6 = dict(
+    Rb=4992.184390023008,
+    Kc=0.9944975024583323,
+    Ra1=0.038879485085827524,
+    La1=0.1939128934287285,
+    Ca10=5.697001824968361e-10,
+    Lb1=263.2855133800461,
+    Cb1=2.0976749013330163e-10,
+    Lb2=2984.452842982463,
+    Cb2=1.1706497633638472e-10,
+    Lb3=915.3025788286448,
+    Cb3=5.071506413968614e-10,
+    Lb4=144.36884087486382,
+    Cb4=3.359110864623224e-10,
+    Lb5=619.4516339913168,
+    Cb5=2.883528433890376e-10,
+    Lb6=286.1765286462391,
+    Cb6=4.246399418351891e-10,
+    Cb13=1.1246027607280697e-10,
+    Cb46=5.478151121139045e-10,
+    Cb10=7.805715714912274e-11,
+    Cab1=5.015313306313908e-10,
+    Lc=100.0,
+    Rc=28946.654904441042,
+    Ka1b1=0.995693419437478,
+    Ka1b2=0.9959736153918262,
+    Ka1b3=0.9979147694978804,
+    Ka1b4=0.9949207945574605,
+    Ka1b5=0.9957878705540111,
+    Ka1b6=0.9956177670184142,
+    Kb1b2=0.9965466774776631,
+    Kb1b3=0.9920695557868738,
+    Kb1b4=0.9939606913774964,
+    Kb1b5=0.9966533162984654,
+    Kb1b6=0.9948615957447098,
+    Kb2b3=0.9930005977358798,
+    Kb2b4=0.9956997613224632,
+    Kb2b5=0.9978595076471212,
+    Kb2b6=0.9971371163762965,
+    Kb3b4=0.9950248302940143,
+    Kb3b5=0.9940374541449705,
+    Kb3b6=0.9921292896279094,
+    Kb4b5=0.9944100677953724,
+    Kb4b6=0.9916717162009233,
+    Kb5b6=0.9927618387674071,
+    Ka1c=0.9944975024583323,
+    Kb1c=0.9944975024583323,
+    Kb2c=0.9944975024583323,
+    Kb3c=0.9944975024583323,
+    Kb4c=0.9944975024583323,
+    Kb5c=0.9944975024583323,
+    Kb6c=0.9944975024583323,
+)
+
+
 def hv_4section() -> Model:
     return two_winding(4, _TABLE_5_4, name="hv-4section",
                        description="Two-winding model, 4 HV sections, Table 5.4 (Case Study 1, 33 parameters)")
@@ -373,6 +433,12 @@ def hv_6section() -> Model:
                        "NOT passive (inductance matrix eigenvalue about -0.31 H)")
 
 
+def hv_6section_passive() -> Model:
+    return two_winding(6, _PASSIVE_6, tied_core_coupling=True, name="hv-6section-passive",
+                       description="Two-winding model, 6 HV sections, passive: re-estimated to reproduce the six "
+                       "responses of Table 5.12 with a positive-definite inductance matrix")
+
+
 BUILTIN: dict[str, Callable[[], Model]] = {
     "two-section": two_section,
     "three-section": three_section,
@@ -381,6 +447,7 @@ BUILTIN: dict[str, Callable[[], Model]] = {
     "hv-4section-cab2a": hv_4section_cab2a,
     "hv-4section-cab2b": hv_4section_cab2b,
     "hv-6section": hv_6section,
+    "hv-6section-passive": hv_6section_passive,
 }
 
 _CASCADE_RE = re.compile(r"^cascade-(\d+)(-open)?$")

@@ -107,3 +107,16 @@ def test_parameter_cycle():
 def test_unknown_override():
     with pytest.raises(CircuitError, match="unknown parameter or element 'nope'"):
         rlc().resolve({"nope": 1.0})
+
+
+def test_passive_six_section_reproduces_table_5_12():
+    """The re-estimated 6-section model is passive and follows Table 5.12's six responses (10 Hz - 10 kHz)."""
+    passive = get_model("hv-6section-passive")
+    assert passive.circuit.smallest_inductance_eigenvalue(passive.circuit.resolve()) > 1e-4
+    f = np.logspace(1, 4, 300)
+    ours = passive.response_set().evaluate(f)
+    with pytest.warns(NonPassiveWarning):
+        thesis = get_model("hv-6section").response_set().evaluate(f)
+    for name in ours:
+        err_db = 20 * np.log10(np.abs(ours[name] / thesis[name]))
+        assert np.max(np.abs(err_db)) < 1.5 and np.sqrt(np.mean(err_db**2)) < 0.3, name

@@ -150,7 +150,7 @@ def build_approach(approach: str, metric: str, params: ParameterSet | None = Non
 
 def optimiser_settings(approach: str, optimiser: str, quick: bool) -> tuple[str, dict[str, Any], Budget]:
     """Method name, options and budget: population and iterations reduced from the thesis's 1000 x 250."""
-    pop, iters = (40, 30) if quick else (200, 100)
+    pop, iters = (60, 50) if quick else (300, 150)
     if approach == "frequency":
         pop, iters = (24, 12) if quick else (100, 60)
     if approach == "emd":
