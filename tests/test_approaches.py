@@ -101,7 +101,7 @@ def test_simulated_frequency_at_the_target_is_close_to_analytic_where_coherent()
     """Welch H1 of the simulated PRIS record vs the analytic Zin: within 0.01 decades (2.3 %)
     wherever the coherence (quarter-record segments) is at least 0.999."""
     spec = two.CASES["2"]
-    resp, f, (n, welch, bins) = two.simulated_target(spec, ["Zin"])
+    resp, f, (n, welch, bins, _) = two.simulated_target(spec, ["Zin"])
     w = td.simulate_pris(get_model("two-section").circuit, "in", two.SOURCE, spec["fs"], overrides=two._target_overrides())
     w = {k: v[:n] for k, v in w.items()}
     short = ap.WelchSettings(nperseg=n // 4)

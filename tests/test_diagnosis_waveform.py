@@ -86,13 +86,31 @@ def test_switch_ringing_with_snubber_named():
     assert d.evidence["localisation"]["where"] == "waveform edges and ringing"
 
 
-@pytest.mark.parametrize("seed,fs", [(1, 2e6), (2, 2e6), (3, 10e6)])
+@pytest.mark.parametrize("seed,fs", [(1, 2e6), (2, 2e6), (3, 10e6), (4, 1.2345e6)])
 def test_clean_data_is_none(seed, fs):
     case = waveform_case("none", seed, fs=fs)
     d = _diagnose(case)
     assert d.cause == "none" and d.gain == 0.0
     assert all(c["gain"] < 0.05 for c in d.candidates())
     assert d.as_json()["extended_cost"] == d.as_json()["baseline_cost"]
+
+
+def test_switching_between_samples():
+    """fs not a multiple of f_clk: the bridge switches between samples; the bit clock recovers the instants.
+
+    On the sample grid (the contract's reading) the up-to-one-sample timing
+    error looks like an inductance drift; with the recovered instants it does not.
+    """
+    case = waveform_case("none", 5, fs=1.2345e6)
+    d = _diagnose(case)
+    assert d.evidence["edge_timing"]["mode"] == "clock"
+    assert d.evidence["edge_timing"]["samples_per_bit"] == pytest.approx(123.45, abs=1e-3)
+    assert d.cause == "none"
+    on_grid = diagnose_waveforms(case.waveforms, **NOMINAL, edge_timing="sample", progress=False)
+    assert on_grid.baseline.cost > 5 * d.baseline.cost
+    drift = waveform_case("component-drift", 5, fs=1.2345e6)
+    d = _diagnose(drift)
+    assert d.cause == "component-drift" and d.gain >= 0.5
 
 
 def test_thesis_measured_values_name_series_resistance():

@@ -35,6 +35,18 @@ samples, ``RSS`` = the sum of the normalised squared residuals) is named
 only if it beats the baseline's BIC by at least 10 and removes at least
 20 % of the baseline cost; otherwise the cause is ``none``.
 
+Switching instants: by the waveform contract the commanded level of row k
+holds from ``time_s[k]`` to ``time_s[k+1]``. When the sampling rate is not a
+multiple of the PRBS clock the bridge really switches between samples; the
+instants are then recovered from the regular bit clock (see
+:func:`_switch_times`) and simulated exactly, since an error of up to one
+sample would otherwise look like an inductance drift.
+
+Speed: on records sampled much faster than the source's dynamics (ringing
+cases, e.g. 20 MS/s) the baseline and the slow extensions are fitted on a
+subsample that keeps every edge on its grid (at least 200 samples per bit)
+and then refined on all samples; every cost and BIC is on all samples.
+
 Simulation: each parameter set's state matrix is diagonalised, the exact ZOH
 recurrence of every mode ``z[k+1] = exp(mu h) z[k] + g u[k]`` is run by a
 first-order IIR filter, and the free responses (for the initial state) are
@@ -151,18 +163,31 @@ def _small_product(X: np.ndarray, R: np.ndarray) -> np.ndarray:
 
 
 class _Input:
-    """A piecewise-constant input split into runs of constant value (for the closed-form modal response)."""
+    """A piecewise-constant input split into runs of constant value (for the closed-form modal response).
 
-    def __init__(self, u: np.ndarray):
+    ``switch``: the instants of the level changes in samples from the first
+    sample (one per change in ``u``, change ``j`` in ``(k_j - 1, k_j]`` where
+    ``k_j`` is the first sample at the new level); default ``k_j`` itself,
+    the waveform contract's "row k holds from time_s[k] to time_s[k+1]".
+    """
+
+    def __init__(self, u: np.ndarray, switch: np.ndarray | None = None):
         self.u = np.asarray(u, float)
         K = self.u.size
-        self.starts = np.concatenate([[0], np.flatnonzero(np.diff(self.u) != 0) + 1])
+        edges = np.flatnonzero(np.diff(self.u) != 0) + 1
+        self.starts = np.concatenate([[0], edges])
         self.lengths = np.diff(np.concatenate([self.starts, [K]]))
         self.levels = self.u[self.starts]
         self.seg = np.repeat(np.arange(self.starts.size), self.lengths)
         self.offset = np.arange(K) - self.starts[self.seg]
         self.max_len = int(self.lengths.max())
         self.K = K
+        t_sw = np.concatenate([[0.0], edges.astype(float) if switch is None else np.asarray(switch, float)])
+        if t_sw.size != self.starts.size:
+            raise ValueError(f"{t_sw.size - 1} switching instants for {edges.size} level changes")
+        self.delay = self.starts - t_sw  # samples from each switching instant to the run's first sample, [0, 1)
+        self.duration = np.diff(np.concatenate([t_sw, [float(K)]]))  # samples from one switch to the next
+        self.exact_grid = switch is None
 
 
 #: Above this many runs of constant input the modal response is filtered sample by sample instead.
@@ -203,14 +228,18 @@ def _simulate_one(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, in
         CV = (C @ V)[:, keep] * fac[None, :]  # (2, m)
         z0 = np.zeros(m, complex) if x0 is None else (W @ np.asarray(x0, float))[keep]
         z_ss = -np.outer(inp.levels, (bt / mu_k).astype(complex))  # (runs, m)
-        runs = inp.starts.size <= _MAX_RUNS
+        runs = inp.starts.size <= _MAX_RUNS or not inp.exact_grid
         if runs:
             pw = np.exp(np.outer(np.arange(inp.max_len + 1) * h, mu_k))  # (max_len + 1, m)
             starts = np.empty_like(z_ss)
-            z = z0.copy()
-            decay = pw[inp.lengths]  # (runs, m)
+            z = z0.copy()  # modal state at the current switching instant
+            if inp.exact_grid:
+                decay, lag = pw[inp.lengths], None
+            else:  # switching between samples: step to the first sample and to the next switch exactly
+                decay = np.exp(np.outer(inp.duration * h, mu_k))
+                lag = np.exp(np.outer(inp.delay * h, mu_k))
             for j in range(inp.starts.size):
-                starts[j] = z
+                starts[j] = z if lag is None else z_ss[j] + lag[j] * (z - z_ss[j])
                 z = z_ss[j] + decay[j] * (z - z_ss[j])
             zk = z_ss[inp.seg] + pw[inp.offset] * (starts - z_ss)[inp.seg]  # (K, m)
         else:
@@ -392,10 +421,10 @@ class _Problem:
     """Measured record, nominal source and the machinery to evaluate and fit candidates."""
 
     def __init__(self, w: Waveforms, nominal: Mapping[str, float], u: np.ndarray, r_load: float | None,
-                 snubber: tuple[float, float], fit_initial_state: bool = True):
+                 snubber: tuple[float, float], fit_initial_state: bool = True, switch: np.ndarray | None = None):
         self.h = w.dt
         self.u = u
-        self.inp = _Input(u)
+        self.inp = _Input(u, switch)
         self.K = u.size
         self.y = np.stack([w.v_in, w.i_in], axis=1)
         self.sigma = np.array([np.std(w.v_in), np.std(w.i_in)])
@@ -575,6 +604,51 @@ def _bit_samples(u: np.ndarray) -> float:
         return float(u.size)
     runs = np.diff(e)
     return float(runs.min())
+
+
+def _switch_times(u: np.ndarray) -> tuple[np.ndarray | None, dict[str, Any]]:
+    """Sub-sample switching instants from a regular bit clock, or ``None`` for the sample grid.
+
+    The H-bridge switches on a clock: change ``j`` happens at ``phi + b_j P``
+    samples (``b_j`` its bit index, ``P`` samples per bit), inside
+    ``(k_j - 1, k_j]`` where ``k_j`` is the first sample at the new level. When
+    ``P`` is a whole number and every change sits on the grid, the record
+    follows the waveform contract (level held from row k) and the instants are
+    the samples themselves. Otherwise ``phi`` and ``P`` are the centre of the
+    region allowed by all the intervals (a linear programme maximising the
+    margin); they are used when that region is narrower than half a sample.
+    """
+    from scipy.optimize import linprog
+
+    e = _edges(u).astype(float)
+    info: dict[str, Any] = {"mode": "sample", "reason": ""}
+    if e.size < 4:
+        info["reason"] = "too few edges to estimate a bit clock"
+        return None, info
+    dk = np.diff(e)
+    n0 = dk.min()
+    bits = np.concatenate([[0.0], np.cumsum(np.rint(dk / n0))])
+    P0 = float(np.polyfit(bits, e, 1)[0])
+    bits = np.concatenate([[0.0], np.cumsum(np.rint(dk / P0))])
+    P = round(P0)
+    if P > 0 and np.all(dk == np.diff(bits) * P):
+        info.update(reason="edges on a whole number of samples per bit (waveform contract)", samples_per_bit=float(P))
+        return None, info
+    # maximise m subject to e - 1 + m <= phi + b P <= e - m
+    A = np.concatenate([np.stack([np.ones_like(bits), bits, np.ones_like(bits)], 1),
+                        np.stack([-np.ones_like(bits), -bits, np.ones_like(bits)], 1)])
+    b = np.concatenate([e, -(e - 1)])
+    sol = linprog([0.0, 0.0, -1.0], A_ub=A, b_ub=b, bounds=[(None, None), (1.0, None), (0.0, 0.5)], method="highs")
+    if not sol.success:
+        info["reason"] = "switching instants do not follow a regular clock"
+        return None, info
+    phi, Pc, margin = (float(v) for v in sol.x)
+    info.update(samples_per_bit=Pc, phase_samples=phi, margin_samples=margin)
+    if margin > 0.25:
+        info["reason"] = "clock phase ambiguous within a sample; switching taken on the samples"
+        return None, info
+    info.update(mode="clock", reason="switching between samples: instants from the fitted bit clock")
+    return phi + bits * Pc, info
 
 
 def _decimation(u: np.ndarray, per_bit: int = 200) -> tuple[int, int]:
@@ -794,6 +868,7 @@ def diagnose_waveforms(
     min_delta_bic: float = 10.0,
     min_gain: float = 0.2,
     fit_initial_state: bool = True,
+    edge_timing: str = "auto",
     progress: bool = True,
 ) -> WaveformDiagnosis:
     """Diagnose measured PRIS waveforms of the source driving a resistive load.
@@ -818,6 +893,13 @@ def diagnose_waveforms(
         Thresholds for naming a cause instead of ``none``.
     fit_initial_state : bool
         Fit the source's initial state (default); else start from rest.
+    edge_timing : ``auto`` or ``sample``
+        ``sample``: the bridge switches on the samples (the waveform
+        contract). ``auto`` (default): the same when the edges sit on a whole
+        number of samples per bit; otherwise the switching instants between
+        samples are recovered from the regular bit clock (a record whose
+        sampling rate is not a multiple of the clock frequency), which the
+        exact simulation then honours.
     progress : bool
         Progress lines on stderr.
 
@@ -834,6 +916,8 @@ def diagnose_waveforms(
     """
     t_start = time.perf_counter()
     _check_positive(rpris=rpris, lpris=lpris, cpris=cpris, vdc=vdc, r_load=r_load)
+    if edge_timing not in ("auto", "sample"):
+        raise DiagnosisError(f"edge_timing must be 'auto' or 'sample' (got {edge_timing!r})")
     if rsnub < 0 or csnub < 0 or (rsnub > 0) != (csnub > 0):
         raise DiagnosisError("snubber needs both rsnub > 0 and csnub > 0 (or neither)")
     w = load_waveforms(waveforms)
@@ -848,7 +932,10 @@ def diagnose_waveforms(
         if not np.std(getattr(w, s)) > 0:
             raise DiagnosisError(f"{s} is constant: nothing to compare")
     nominal = {"rpris": float(rpris), "lpris": float(lpris), "cpris": float(cpris)}
-    prob = _Problem(w, nominal, u, r_load, (float(rsnub), float(csnub)), fit_initial_state)
+    switch, timing = _switch_times(u) if edge_timing == "auto" else (None, {"mode": "sample", "reason": "requested"})
+    if timing["mode"] == "clock":
+        _log(f"switching between samples: bit clock {timing['samples_per_bit']:.4f} samples per bit", progress)
+    prob = _Problem(w, nominal, u, r_load, (float(rsnub), float(csnub)), fit_initial_state, switch)
     if not prob.r_load0 > 0:
         raise DiagnosisError("v_in and i_in are not positively correlated: not a resistive load "
                              "(or i_in has the wrong sign)")
@@ -858,11 +945,16 @@ def diagnose_waveforms(
     fmin_ring, fmax_ring = _RING_MIN_FCLK * fclk, _RING_MAX_FS / h
 
     # fits of the slow effects on a subsampled record (exact: the edges stay on its grid), polished on all samples
-    q, k0 = _decimation(u)
+    q, k0 = _decimation(u) if switch is None else (max(1, int(timing["samples_per_bit"] // 200)), 0)
     fast = prob
     if q > 1:
         ws = Waveforms(w.time_s[k0::q], u[k0::q], w.v_in[k0::q], w.i_in[k0::q])
-        fast = _Problem(ws, nominal, u[k0::q], r_load, (float(rsnub), float(csnub)), fit_initial_state)
+        sw = None if switch is None else switch / q
+        if sw is not None and _edges(u[k0::q]).size != sw.size:
+            q = 1
+        else:
+            fast = _Problem(ws, nominal, u[k0::q], r_load, (float(rsnub), float(csnub)), fit_initial_state, sw)
+    if q > 1:
         _log(f"slow effects fitted on every {q}th sample, then refined on all {K}", progress)
 
     def two_stage(cand: _Candidate, starts: list[np.ndarray], max_nfev: int = 60) -> WaveformFit:
@@ -932,6 +1024,7 @@ def diagnose_waveforms(
     diag.evidence = {
         "cost_definition": "sum over v_in and i_in of mean squared error / variance of the measured signal",
         "samples": K, "fs_hz": w.fs, "bit_s": bit_s, "switching_edges": int(edges.size),
+        "edge_timing": timing,
         "r_load_ohm": {"baseline": baseline.values["r_load"], "extended": diag.extended.values["r_load"],
                        "given": r_load},
         "residual_rms": rms,
