@@ -42,11 +42,10 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 from scipy import signal as _signal
 
 from pris_cosim.arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangement
@@ -356,7 +355,6 @@ class InjectionEngine:
         ok = _values_finite(values, P) & np.all(np.isfinite(A.reshape(P, -1)), axis=1)
         A = np.where(ok[:, None, None], A, 0.0)
         B = np.where(ok[:, None, None], B, 0.0)
-        n = A.shape[1]
         Phi, Gam = _batched_zoh(A, B, 1.0 / self.fs)
         g = Gam[:, :, 0]
         with np.errstate(over="ignore", invalid="ignore"):

@@ -174,7 +174,7 @@ def _parameter_set(model: Any, cfg: dict[str, Any]) -> Any:
 
 def run_estimate(cfg: dict[str, Any], progress: bool = True) -> dict[str, Any]:
     """One estimation from a configuration dictionary (see the module docstring)."""
-    from pris_cosim import spectral, timedomain as td
+    from pris_cosim import timedomain as td
     from pris_cosim.arrangement import SourceSettings
     from pris_cosim.measured import read_response_csv, read_waveform_csv
     from pris_cosim.models import get_model

@@ -842,7 +842,6 @@ def _local_trust_constr(ev: _Evaluator, x0: np.ndarray, o: LocalOptions) -> tupl
 
 def _local_nelder_mead(ev: _Evaluator, x0: np.ndarray, o: LocalOptions) -> tuple[np.ndarray, float, str]:
     """Bounded Nelder-Mead; reflection, expansion and both contractions in one batch."""
-    n = ev.n
     step = np.where(x0 + 0.05 <= 1.0, 0.05, -0.05)
     simplex = np.vstack([x0, x0 + np.diag(step)])
     fs = ev(simplex)

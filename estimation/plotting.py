@@ -34,10 +34,9 @@ def search_space_axes(space: Mapping[str, Any], metric: str, ax: Any = None) -> 
 
 def search_space_figure(space: Mapping[str, Any], path: str | Path) -> Path:
     """Both metrics of one approach side by side, written to ``path`` (PNG)."""
-    import matplotlib
+    from pris_cosim.plotting import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     metrics = list(space["costs"])
     fig, axes = plt.subplots(1, len(metrics), figsize=(5.5 * len(metrics), 4), squeeze=False)

@@ -24,7 +24,7 @@ import numpy as np
 from . import __version__
 from .circuit import Circuit
 from .errors import NonPassiveWarning
-from .frf import Response, ResponseModel, logspace_hz
+from .frf import Response, logspace_hz
 from .models import Configuration, Model, ResponseSet, get_model, model_names
 from .units import parse_value
 

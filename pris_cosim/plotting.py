@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 
 
-def _pyplot() -> Any:
+def pyplot() -> Any:
+    """``matplotlib.pyplot`` on the non-interactive Agg backend (imported lazily)."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -35,7 +36,7 @@ def plot_response(
     ax : pair of matplotlib axes, optional
         (magnitude axis, phase axis); new ones when omitted.
     """
-    plt = _pyplot()
+    plt = pyplot()
     if ax is None:
         _, ax = plt.subplots(2, 1, sharex=True, figsize=(6, 5))
     mag_ax, ph_ax = ax
@@ -72,7 +73,7 @@ def plot_responses(
     reference_frequency_hz : array_like, optional
         Frequencies of ``reference`` (default: ``frequency_hz``).
     """
-    plt = _pyplot()
+    plt = pyplot()
     names = list(responses)
     fig, axes = plt.subplots(2, len(names), sharex="col", figsize=(4.2 * len(names), 5.5), squeeze=False)
     for j, name in enumerate(names):

@@ -27,21 +27,13 @@ import numpy as np
 
 from .arrangement import SourceSettings
 from .frf import ResponseModel
+from .plotting import pyplot
 from .models import get_model
 from .spectral import estimate_response, welch_psd
 from .timedomain import simulate_pris
 
 BASE_RLC = (31.8, 2.53e-3, 10e-6)  # Ohm, H, F; alpha = 1000 gives 31.8 kOhm, 2.53 H, 10 nF (thesis 4.1.2)
 COHERENCE_MIN = 0.99
-
-
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _merit(est: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> dict[str, float]:
@@ -73,7 +65,7 @@ def impedance_level_study(alphas: tuple[float, ...] = (1.0, 1e3, 1e6), fs: float
     """
     rm = ResponseModel(get_model("two-section").circuit, "in")
     results: dict[str, Any] = {}
-    plt = _pyplot() if out_dir else None
+    plt = pyplot() if out_dir else None
     for alpha in alphas:
         w = two_section_waveforms(alpha, fs)
         resp = estimate_response(w["i_in"], w["v_in"], fs, fmin=1.0)
@@ -121,7 +113,7 @@ def two_section_responses(fs: float = 300e3, out_dir: str | Path | None = None) 
     ref = model.response_set().evaluate(f)
     results = {n: _merit(e.values, ref[n], _band(f, e.coherence, 20.0, 10e3 / 3)) for n, e in est.items()}
     if out_dir:
-        plt = _pyplot()
+        plt = pyplot()
         fig, ax = plt.subplots(2, 3, figsize=(13, 6), sharex=True)
         for j, n in enumerate(est):
             ax[0, j].loglog(f, np.abs(est[n].values), lw=1, label="PRIS")
@@ -152,7 +144,7 @@ def three_section_responses(fs: float = 10e6, out_dir: str | Path | None = None)
     ref = ResponseModel(model.circuit, "n1").evaluate(f)["Zin"]
     results = {"Zin": _merit(resp.values, ref, _band(f, resp.coherence, 1e3, 100e3 / 3 * 10))}
     if out_dir:
-        plt = _pyplot()
+        plt = pyplot()
         fig, ax = plt.subplots(1, 2, figsize=(12, 4))
         k = int(200e-6 * fs)
         ax[0].plot(w["time_s"][:k] * 1e6, w["v_in"][:k], lw=0.8, label="v_in (V)")

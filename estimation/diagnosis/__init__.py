@@ -2,5 +2,7 @@
 
 from .diagnose import Diagnosis, diagnose_frequency
 from .fit import DiagnosisError, FitResult, FrequencyFit
+from .waveform import WaveformDiagnosis, diagnose_waveforms
 
-__all__ = ["Diagnosis", "DiagnosisError", "FitResult", "FrequencyFit", "diagnose_frequency"]
+__all__ = ["Diagnosis", "DiagnosisError", "FitResult", "FrequencyFit", "WaveformDiagnosis", "diagnose_frequency",
+           "diagnose_waveforms"]

@@ -4,27 +4,18 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from pris_cosim.netlist import write_netlist
+from pris_cosim.plotting import pyplot
 
 from .diagnose import Diagnosis
 
 
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def plot_fits(diag: Diagnosis, path: Path) -> Path:
     """Measured, baseline and extended responses: magnitude and phase per response."""
-    plt = _pyplot()
+    plt = pyplot()
     names = list(diag.measured)
     fig, axes = plt.subplots(2, len(names), figsize=(4.6 * len(names), 6), squeeze=False, sharex="col")
     f = diag.frequency_hz
@@ -51,7 +42,7 @@ def plot_fits(diag: Diagnosis, path: Path) -> Path:
 
 def plot_residuals(diag: Diagnosis, path: Path) -> Path:
     """Residuals before and after: magnitude error (dB) and phase error (deg) against frequency."""
-    plt = _pyplot()
+    plt = pyplot()
     names = list(diag.measured)
     fig, axes = plt.subplots(2, len(names), figsize=(4.6 * len(names), 5.5), squeeze=False, sharex="col")
     f = diag.frequency_hz

@@ -1187,10 +1187,9 @@ def write_report(diagnosis: WaveformDiagnosis, directory: str | os.PathLike) -> 
 
 
 def _plots(d: WaveformDiagnosis, out: Path) -> list[str]:
-    import matplotlib
+    from pris_cosim.plotting import pyplot
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     t = d.time_s - d.time_s[0]
     h = float(t[1] - t[0])

@@ -40,7 +40,6 @@ full study), written as ``search_space_<approach>.png``.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -53,7 +52,6 @@ from pris_cosim.arrangement import SourceSettings
 from pris_cosim.models import get_model
 
 from .. import approaches as ap
-from ..costs import Decomposer
 from ..executor import Task
 from ..optimisers import Budget
 from ..parameters import ParameterSet
