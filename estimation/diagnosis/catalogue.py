@@ -164,7 +164,8 @@ class MagnetisingInductance(Extension):
 
     def __post_init__(self) -> None:
         self.cause = "magnetising-inductance"
-        self.parameters = [ExtraParameter("b", 0.0, 1.0, (1e-4, 0.05, 0.2), log=False, description="exponent of (2.5)")]
+        self.parameters = [ExtraParameter("b", 0.0, 1.0, (1e-4, 0.02, 0.04, 0.07, 0.1, 0.2), log=False,
+                                          description="exponent of (2.5)")]
 
     def per_frequency(self, circuit, values, f, p):
         factor = (f / self.f0) ** (-p["b"])

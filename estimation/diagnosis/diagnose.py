@@ -167,10 +167,15 @@ def diagnose_frequency(
         t = time.perf_counter()
         if isinstance(ext, MissingSection):
             res = _fit_missing_section(ext, values, f, data, fixed)
-        else:
-            fit = FrequencyFit(fitted_model.circuit, list(model.configurations.values()), f, data, fixed, extension=ext)
-            starts = ext.starts(fit.circuit, values, impedance_scale) if isinstance(ext, CoreLoss) else None
-            res = fit.fit(starts)
+        else:  # from the fitted baseline and from the nominal values (the baseline fit may have bent them)
+            res = None
+            for circuit in ((fitted_model.circuit, model.circuit) if model.circuit is not fitted_model.circuit
+                            else (fitted_model.circuit,)):
+                fit = FrequencyFit(circuit, list(model.configurations.values()), f, data, fixed, extension=ext)
+                starts = ext.starts(fit.circuit, values, impedance_scale) if isinstance(ext, CoreLoss) else None
+                trial = fit.fit(starts)
+                if res is None or trial.cost < res.cost:
+                    res = trial
         if res is None:
             continue
         results.append(res)
