@@ -26,7 +26,7 @@ from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
 from .catalogue import CoreLoss, Extension, MissingSection, frequency_extensions
 from ..resonances import count_parallel, find_resonances
 from .evidence import band_table, localise, resonance_comparison
-from .fit import DiagnosisError, FitResult, FrequencyFit
+from .fit import DiagnosisError, FitResult, FrequencyFit, significant
 
 MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
 
@@ -187,7 +187,7 @@ def diagnose_frequency(
     pool = matching if matching and _parallel_count(f, baseline.predicted) != target_count else results
     best = min(pool, key=lambda r: r.bic) if pool else None
     chosen = None
-    if best is not None and baseline.bic - best.bic >= min_delta_bic and 1 - best.cost / baseline.cost >= min_gain:
+    if best is not None and significant(baseline.bic, baseline.cost, best.bic, best.cost, min_delta_bic, min_gain):
         chosen = best
     diag = Diagnosis(chosen.cause if chosen else "none", baseline, chosen, results, f, data)
     diag.evidence = {

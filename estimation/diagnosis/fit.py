@@ -34,6 +34,18 @@ class DiagnosisError(ValueError):
     """Input that a diagnosis cannot use (the message says why)."""
 
 
+def bic(rss: float, n_residuals: int, n_params: int) -> float:
+    """Bayesian information criterion ``N ln(RSS/N) + k ln N`` (Gaussian residuals)."""
+    n = n_residuals
+    return float(n * np.log(max(rss, 1e-300) / n) + n_params * np.log(n))
+
+
+def significant(baseline_bic: float, baseline_cost: float, bic_: float, cost: float,
+                min_delta_bic: float, min_gain: float) -> bool:
+    """The naming rule: an extension counts only if it beats the baseline's BIC and removes enough cost."""
+    return baseline_bic - bic_ >= min_delta_bic and 1 - cost / baseline_cost >= min_gain
+
+
 @dataclass
 class FitResult:
     """Outcome of one fit.
@@ -72,8 +84,7 @@ class FitResult:
     @property
     def bic(self) -> float:
         """Bayesian information criterion ``N ln(RSS/N) + k ln N``."""
-        n = self.n_residuals
-        return float(n * np.log(max(self.rss, 1e-300) / n) + self.n_params * np.log(n))
+        return bic(self.rss, self.n_residuals, self.n_params)
 
 
 def coupling_names(circuit: Circuit) -> set[str]:

@@ -76,7 +76,7 @@ from pris_cosim.measured import Waveforms, read_waveform_csv
 from pris_cosim.mna import MNA, StateSpace
 from pris_cosim.timedomain import simulate_pwc
 
-from .fit import DiagnosisError
+from .fit import DiagnosisError, bic, significant
 
 __all__ = [
     "WAVEFORM_CAUSES",
@@ -413,8 +413,7 @@ class WaveformFit:
     @property
     def bic(self) -> float:
         """Bayesian information criterion ``N ln(RSS/N) + k ln N``."""
-        n = self.n_residuals
-        return float(n * np.log(max(self.rss, 1e-300) / n) + self.n_params * np.log(n))
+        return bic(self.rss, self.n_residuals, self.n_params)
 
 
 class _Problem:
@@ -1005,7 +1004,7 @@ def diagnose_waveforms(
     # ---- selection
     best = min(results, key=lambda r: r.bic) if results else None
     chosen = None
-    if best is not None and baseline.bic - best.bic >= min_delta_bic and 1 - best.cost / baseline.cost >= min_gain:
+    if best is not None and significant(baseline.bic, baseline.cost, best.bic, best.cost, min_delta_bic, min_gain):
         chosen = best
     measured = {s: getattr(w, s) for s in SIGNALS}
     diag = WaveformDiagnosis(chosen.cause if chosen else "none", baseline, chosen, results, w.time_s, u, measured,
