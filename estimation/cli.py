@@ -5,8 +5,10 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
 :func:`register` adds both sub-commands.
 
 ``pris-cosim study NAME [--quick] [--json] [--out DIR] [--scheduler ADDR] [--workers N] [--seed N]``
-    Runs the thesis's estimation study NAME (``two-section``,
-    ``three-section``) through :func:`estimation.executor.run_tasks`: local
+    Runs the estimation study NAME (``two-section``, ``three-section``,
+    ``hv-transformer`` (thesis chapter 5; ``--measured FILE.csv`` fits measured
+    responses instead of the virtual lab's, ``--cases 1,3`` a subset),
+    ``real-data`` (fits of the real measured files)) through :func:`estimation.executor.run_tasks`: local
     processes by default, ``--scheduler serial`` in this process, or a Dask
     scheduler ``tcp://host:port``. Every finished run is written at once to
     ``DIR/runs/<id>.json`` and ``DIR/results.csv``; running again resumes
@@ -66,7 +68,7 @@ import numpy as np
 
 from .executor import to_jsonable
 
-STUDIES = ("two-section", "three-section")
+STUDIES = ("two-section", "three-section", "hv-transformer", "real-data")
 
 
 class EstimationInputError(ValueError):
@@ -92,15 +94,37 @@ def emit(obj: Any) -> None:
 
 # ====================================================================== study
 def run_study_command(name: str, quick: bool = False, out: str | None = None, scheduler: str | None = None,
-                      workers: int | None = None, seed: int = 1, progress: bool = True) -> dict[str, Any]:
-    """Run a study by name; the dictionary that ``--json`` prints."""
+                      workers: int | None = None, seed: int = 1, progress: bool = True,
+                      measured: str | None = None, cases: str | None = None) -> dict[str, Any]:
+    """Run a study by name; the dictionary that ``--json`` prints.
+
+    ``measured`` (a responses CSV) and ``cases`` (comma-separated, e.g. ``"1,3"``) apply to
+    ``hv-transformer`` only.
+    """
     if name not in STUDIES:
         raise EstimationInputError(f"unknown study {name!r} (choose from {', '.join(STUDIES)})")
     if workers is not None and workers < 1:
         raise EstimationInputError(f"--workers must be at least 1 (got {workers})")
     if scheduler is not None and scheduler not in ("processes", "serial") and "://" not in scheduler:
         raise EstimationInputError(f"--scheduler must be 'processes', 'serial' or an address tcp://host:port (got {scheduler!r})")
+    if (measured or cases) and name != "hv-transformer":
+        raise EstimationInputError("--measured and --cases apply to the hv-transformer study only")
     out = out or f"study-{name}{'-quick' if quick else ''}"
+    if name == "hv-transformer":
+        from .studies import hv_transformer
+
+        chosen = [c.strip() for c in cases.split(",") if c.strip()] if cases else None
+        for c in chosen or ():
+            if c not in hv_transformer.CASES:
+                raise EstimationInputError(f"unknown case {c!r} (cases: {', '.join(hv_transformer.CASES)})")
+        if measured is not None and not Path(measured).is_file():
+            raise EstimationInputError(f"measured data file not found: {measured}")
+        return hv_transformer.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed - 1,
+                                  progress=progress, measured=measured, cases=chosen)
+    if name == "real-data":
+        from .studies import real_data
+
+        return real_data.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed, progress=progress)
     if name == "two-section":
         from .studies import two_section as mod
     else:
@@ -109,7 +133,8 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
 
 
 def cmd_study(args: argparse.Namespace) -> int:
-    summary = run_study_command(args.name, args.quick, args.out, args.scheduler, args.workers, args.seed)
+    summary = run_study_command(args.name, args.quick, args.out, args.scheduler, args.workers, args.seed,
+                                measured=args.measured, cases=args.cases)
     if args.json:
         emit(summary)
     else:
@@ -302,14 +327,17 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
 def register(subparsers: Any) -> None:
     """Add ``study`` and ``estimate`` to the ``pris-cosim`` sub-commands."""
-    p = subparsers.add_parser("study", help="run a thesis estimation study (two-section, three-section)")
+    p = subparsers.add_parser("study", help=f"run an estimation study ({', '.join(STUDIES)})")
     p.add_argument("name", help=f"study: {', '.join(STUDIES)}")
     p.add_argument("--quick", action="store_true", help="reduced budgets (minutes), same conclusions")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.add_argument("--out", metavar="DIR", help="results directory (default study-NAME[-quick]); reruns resume")
     p.add_argument("--scheduler", metavar="ADDR", help="'processes' (default), 'serial' or a Dask address tcp://host:port")
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: CPU count)")
-    p.add_argument("--seed", type=int, default=1, help="optimiser seed (default 1)")
+    p.add_argument("--seed", type=int, default=1, help="optimiser seed (default 1; hv-transformer: lab noise seed - 1)")
+    p.add_argument("--measured", metavar="FILE.csv", help="hv-transformer: fit these six measured responses "
+                   "(interfaces CSV) instead of the virtual lab's")
+    p.add_argument("--cases", metavar="LIST", help="hv-transformer: comma-separated subset of 1,2a,2b,3")
     p.set_defaults(func=cmd_study)
     q = subparsers.add_parser("estimate", help="one estimation from a JSON configuration")
     q.add_argument("--config", required=True, metavar="FILE.json")

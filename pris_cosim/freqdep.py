@@ -259,3 +259,86 @@ def replace_with_ladder(circuit: Circuit, name: str, ladder: FosterRL) -> Circui
             out.add(f"L{prefix}_l{k}", nodes[pos], nodes[pos + 1], float(lk))
             pos += 1
     return out
+
+
+# ---------------------------------------------------------------------- transformer effects
+@dataclass(frozen=True)
+class TransformerEffects:
+    """Frequency-dependent winding and core effects of thesis (2.4)-(2.6), as ladder parameters.
+
+    Attributes
+    ----------
+    skin_a, skin_b, skin_f0 : float, -, -, Hz
+        Winding resistance ``R(f) = (R / skin_c) (1 + skin_a (j f / skin_f0)^skin_b)``:
+        the causal form of (2.6) (``b = 1/2`` is the classical skin effect).
+    skin_c : float
+        ``R_linear / c`` of (2.6): the DC resistance is the linear value divided by ``c``.
+    core_a_factor, core_b_hz : float, -, Hz
+        Core-loss resistance (2.4) ``R_c(f) = a f / (f + b)`` with ``a = core_a_factor * R_c``.
+    magnetising_b, magnetising_f_hz : float, -, Hz
+        Core-loop inductance (2.5) ``L_c(f) = a f^(-b) L_c`` with ``a = magnetising_f_hz^b``:
+        equal to the linear value at ``magnetising_f_hz``, larger below it.
+    band_hz : tuple of float, Hz
+        Band over which the ladders follow the formulas.
+    sections : int
+        Parallel R-L sections per ladder.
+    """
+
+    skin_a: float = 1.0
+    skin_b: float = 0.5
+    skin_f0: float = 1e3
+    skin_c: float = 2.0
+    core_a_factor: float = 2.0
+    core_b_hz: float = 200.0
+    magnetising_b: float = 0.05
+    magnetising_f_hz: float = 1e5
+    band_hz: tuple[float, float] = (1.0, 2e5)
+    sections: int = 6
+
+
+def add_transformer_effects(
+    circuit: Circuit,
+    resistors: list[str],
+    core_resistor: str | None = None,
+    core_inductor: str | None = None,
+    effects: TransformerEffects = TransformerEffects(),
+) -> Circuit:
+    """A numeric copy of ``circuit`` with (2.4)-(2.6) realised as passive R-L ladders.
+
+    Every named winding resistor gets the skin-effect ladder, the core-loss
+    resistor the ladder of (2.4), and the (coupled) core inductor keeps its
+    value and couplings with the frequency-dependent excess of (2.5) in series.
+
+    Parameters
+    ----------
+    circuit : Circuit
+    resistors : list of str
+        Winding resistors (Ohm).
+    core_resistor, core_inductor : str, optional
+        Core-loss resistor and core-loop inductor.
+    effects : TransformerEffects
+
+    Returns
+    -------
+    Circuit
+        Element values are numbers (parameters resolved first).
+    """
+    values = circuit.resolve()
+    out = circuit.with_values({e.name: values[e.key] for e in circuit.elements})
+    fmin, fmax = effects.band_hz
+    n = effects.sections
+    e = effects
+    for name in resistors:
+        r0 = float(values[name.lower()]) / e.skin_c
+        lad = fit_impedance(lambda f, r0=r0: r0 * (1 + e.skin_a * (1j * f / e.skin_f0) ** e.skin_b), fmin, fmax, n)
+        out = replace_with_ladder(out, name, lad)
+    if core_resistor is not None:
+        rc = float(values[core_resistor.lower()])
+        lad = fit_resistance(lambda f: core_loss_resistance(f, e.core_a_factor * rc, e.core_b_hz), fmin, fmax, n)
+        out = replace_with_ladder(out, core_resistor, lad)
+    if core_inductor is not None:
+        lc = float(values[core_inductor.lower()])
+        fh = e.magnetising_f_hz
+        excess = fit_inductance(lambda f: lc * ((f / fh) ** (-e.magnetising_b) - 1), fmin, fh / 3, n)
+        out = replace_with_ladder(out, core_inductor, FosterRL(0.0, lc + excess.l0, excess.r, excess.l))
+    return out
