@@ -224,6 +224,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_sim import register as register_simulation
 
     register_simulation(sub)
+    from .cli_lab import register as register_lab
+
+    register_lab(sub)
     for ep in entry_points(group="pris_cosim.commands"):
         ep.load()(sub)
     return parser
