@@ -71,20 +71,21 @@ def test_freqdep_truth_against_ngspice_ac(config):
 
 
 def test_freqdep_truth_differs_from_linear_model_at_low_frequency():
-    """The effects are visible where the thesis saw the misfit (below 1 kHz), not at 10 kHz."""
-    f = np.array([10.0, 30.0, 1e4])
+    """The core effects show below the 80 Hz resonance (where the thesis saw the misfit), not in the capacitive band."""
+    f = np.logspace(1, 4, 31)
     lin = get_model("hv-6section-passive").response_set(["LVOC"]).evaluate(f)["Zlvoc"]
     fd = get_model("hv-6section-freqdep").response_set(["LVOC"]).evaluate(f)["Zlvoc"]
     d = np.abs(20 * np.log10(np.abs(fd / lin)))
-    assert d[0] > 2.0 and d[1] > 2.0 and d[2] < 2.0
+    assert np.all(d[f <= 30] > 2.0)
+    assert np.all(d[(f >= 300) & (f <= 600)] < 1.0)
 
 
 # ---------------------------------------------------------------------- the fit
 def _synthetic(case: str, ppd: int = 20):
     spec = hv.case_spec(case)
     f = np.logspace(1, 4, 3 * ppd + 1)
-    target = spec.model().response_set().evaluate(f)
-    return spec, f, target
+    model = get_model("hv-6section-passive") if case == "3" else spec.model()  # Table 5.12 is not passive
+    return spec, f, model.response_set().evaluate(f)
 
 
 def test_wnrmse_is_zero_at_the_generating_values_and_refine_recovers_them():
