@@ -119,7 +119,7 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
                 raise EstimationInputError(f"unknown case {c!r} (cases: {', '.join(hv_transformer.CASES)})")
         if measured is not None and not Path(measured).is_file():
             raise EstimationInputError(f"measured data file not found: {measured}")
-        return hv_transformer.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed - 1,
+        return hv_transformer.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed,
                                   progress=progress, measured=measured, cases=chosen)
     if name == "real-data":
         from .studies import real_data
@@ -334,7 +334,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--out", metavar="DIR", help="results directory (default study-NAME[-quick]); reruns resume")
     p.add_argument("--scheduler", metavar="ADDR", help="'processes' (default), 'serial' or a Dask address tcp://host:port")
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: CPU count)")
-    p.add_argument("--seed", type=int, default=1, help="optimiser seed (default 1; hv-transformer: lab noise seed - 1)")
+    p.add_argument("--seed", type=int, default=1, help="optimiser seed (default 1; hv-transformer: the virtual lab's noise seed)")
     p.add_argument("--measured", metavar="FILE.csv", help="hv-transformer: fit these six measured responses "
                    "(interfaces CSV) instead of the virtual lab's")
     p.add_argument("--cases", metavar="LIST", help="hv-transformer: comma-separated subset of 1,2a,2b,3")

@@ -872,23 +872,7 @@ def _save(fig: Any, path: Path, plt: Any) -> Path:
 
 
 def _realise_ladder(circuit: Circuit, name: str, ladder: Any) -> Circuit:
-    """Replace resistor ``name`` by ``ladder`` with its series inductance kept *uncoupled*.
+    """Replace resistor ``name`` by ``ladder`` (its series inductance stays out of the winding's couplings)."""
+    from pris_cosim.freqdep import replace_with_ladder
 
-    :func:`pris_cosim.freqdep.replace_with_ladder` folds a ladder's ``l0``
-    into an inductor in series with the resistor; here that inductor is a
-    coupled winding, whose coupling would then take in the ladder's internal
-    inductance. A separate inductor ``L<name>_int`` in series keeps it out.
-    """
-    from dataclasses import replace as dc_replace
-
-    from pris_cosim.freqdep import FosterRL, replace_with_ladder
-
-    if ladder.l0 <= 0:
-        return replace_with_ladder(circuit, name, ladder)
-    element = circuit.element(name)
-    a, b = element.nodes
-    mid = f"{name}_x".lower()
-    c = circuit.copy()
-    c.elements = [dc_replace(e, nodes=(mid, b)) if e.key == element.key else e for e in c.elements]
-    c.add(f"L{name}_int", a, mid, float(ladder.l0))
-    return replace_with_ladder(c, name, FosterRL(ladder.r0, 0.0, ladder.r, ladder.l))
+    return replace_with_ladder(circuit, name, ladder)

@@ -206,12 +206,18 @@ def _series_inductor(circuit: Circuit, element: Element) -> Element | None:
     return None
 
 
+def _is_coupled(circuit: Circuit, element: Element) -> bool:
+    return any(element.key in (a.lower(), b.lower()) for a, b in (k.nodes for k in circuit.of_kind("K")))
+
+
 def replace_with_ladder(circuit: Circuit, name: str, ladder: FosterRL) -> Circuit:
     """A copy of ``circuit`` with element ``name`` replaced by ``ladder`` between the same nodes.
 
     A resistor or an uncoupled inductor is removed and the chain takes its
     place (elements ``<name>_r0``, ``<name>_l0``, ``<name>_r1``/``<name>_l1`` ...,
-    internal nodes ``<name>_n1`` ...). A coupled inductor keeps its couplings:
+    internal nodes ``<name>_n1`` ...); a resistor's series inductance ``l0``
+    is added to an uncoupled inductor in series with it, or else kept as its
+    own (uncoupled) chain element. A coupled inductor keeps its couplings:
     it stays in the chain with value ``ladder.l0`` and the sections are added
     in series with it (their extra inductance is then uncoupled).
 
@@ -224,9 +230,11 @@ def replace_with_ladder(circuit: Circuit, name: str, ladder: FosterRL) -> Circui
     element = circuit.element(name)
     if element.kind not in "RL":
         raise CircuitError(f"element {element.name!r}: only resistors and inductors can be made frequency dependent")
-    coupled = element.kind == "L" and any(element.key in (a.lower(), b.lower()) for a, b in (k.nodes for k in circuit.of_kind("K")))
+    coupled = element.kind == "L" and _is_coupled(circuit, element)
     prefix = element.name
     series_l = _series_inductor(circuit, element) if element.kind == "R" and ladder.l0 > 0 else None
+    if series_l is not None and _is_coupled(circuit, series_l):
+        series_l = None  # a coupled winding would take the ladder's inductance into its couplings
     chain: list[tuple[str, float]] = []
     if ladder.r0 > 0:
         chain.append(("R", ladder.r0))
