@@ -95,7 +95,7 @@ def emit(obj: Any) -> None:
 # ====================================================================== study
 def run_study_command(name: str, quick: bool = False, out: str | None = None, scheduler: str | None = None,
                       workers: int | None = None, seed: int = 1, progress: bool = True,
-                      measured: str | None = None, cases: str | None = None) -> dict[str, Any]:
+                      measured: str | None = None, cases: str | None = None, diagnose: bool = False) -> dict[str, Any]:
     """Run a study by name; the dictionary that ``--json`` prints.
 
     ``measured`` (a responses CSV) and ``cases`` (comma-separated, e.g. ``"1,3"``) apply to
@@ -107,8 +107,8 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
         raise EstimationInputError(f"--workers must be at least 1 (got {workers})")
     if scheduler is not None and scheduler not in ("processes", "serial") and "://" not in scheduler:
         raise EstimationInputError(f"--scheduler must be 'processes', 'serial' or an address tcp://host:port (got {scheduler!r})")
-    if (measured or cases) and name != "hv-transformer":
-        raise EstimationInputError("--measured and --cases apply to the hv-transformer study only")
+    if (measured or cases or diagnose) and name != "hv-transformer":
+        raise EstimationInputError("--measured, --cases and --diagnose apply to the hv-transformer study only")
     out = out or f"study-{name}{'-quick' if quick else ''}"
     if name == "hv-transformer":
         from .studies import hv_transformer
@@ -120,7 +120,7 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
         if measured is not None and not Path(measured).is_file():
             raise EstimationInputError(f"measured data file not found: {measured}")
         return hv_transformer.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed,
-                                  progress=progress, measured=measured, cases=chosen)
+                                  progress=progress, measured=measured, cases=chosen, diagnose=diagnose)
     if name == "real-data":
         from .studies import real_data
 
@@ -134,7 +134,7 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
 
 def cmd_study(args: argparse.Namespace) -> int:
     summary = run_study_command(args.name, args.quick, args.out, args.scheduler, args.workers, args.seed,
-                                measured=args.measured, cases=args.cases)
+                                measured=args.measured, cases=args.cases, diagnose=args.diagnose)
     if args.json:
         emit(summary)
     else:
@@ -338,6 +338,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--measured", metavar="FILE.csv", help="hv-transformer: fit these six measured responses "
                    "(interfaces CSV) instead of the virtual lab's")
     p.add_argument("--cases", metavar="LIST", help="hv-transformer: comma-separated subset of 1,2a,2b,3")
+    p.add_argument("--diagnose", action="store_true", help="hv-transformer: also diagnose what the best "
+                   "estimate still gets wrong (frequency-dependent elements, a missing section ...)")
     p.set_defaults(func=cmd_study)
     q = subparsers.add_parser("estimate", help="one estimation from a JSON configuration")
     q.add_argument("--config", required=True, metavar="FILE.json")

@@ -170,3 +170,19 @@ def test_study_quick_writes_json_and_plots(tmp_path, monkeypatch):
     assert stored["checks"] == res["checks"]
     for name in ("small_transformer.png", "short_circuit_resistance.png", "admittance_03PK10.png"):
         assert (out / name).stat().st_size > 10_000
+
+
+def test_cli_study_real_data(tmp_path, monkeypatch, capsys):
+    """``pris-cosim study real-data --json``: one JSON object; a missing data directory exits 2 with one line."""
+    from pris_cosim.cli import main
+
+    monkeypatch.setenv(real_data.ENV_VAR, str(tmp_path / "nowhere"))
+    assert main(["study", "real-data", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "nowhere" in err and "\n" not in err
+    _need(SMALL)
+    _need(ADMITTANCE)
+    monkeypatch.setenv(real_data.ENV_VAR, str(REAL))
+    assert main(["study", "real-data", "--quick", "--json", "--out", str(tmp_path / "real")]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["rows"][-1]["case"] == "03PK10" and all(d["checks"].values())
