@@ -470,22 +470,12 @@ def _is_dask_client(obj: Any) -> bool:
     return type(obj).__module__.split(".")[0] == "distributed" and hasattr(obj, "submit")
 
 
-def single_threaded_blas() -> None:
-    """Limit BLAS/LAPACK to one thread in this process (pool workers: one task per core).
-
-    With several worker processes each running a multi-threaded BLAS on small
-    matrices (eigen-decompositions of 20-50 states), the threads fight for the
-    cores: measured 7x slower on 2 cores than single-threaded workers.
-    """
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(limits=1)
-
-
 def _process_pool(workers: int) -> cf.ProcessPoolExecutor:
     # forkserver (Python 3.14's default) avoids forking a process that may run threads.
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+    from ._threads import single_threaded_blas
+
     initializer = single_threaded_blas if workers > 1 else None
     return cf.ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=initializer)
 
