@@ -162,7 +162,7 @@ def test_quick_study_rows(quick_study):
         assert r["passive"] is True and r["min_inductance_eigenvalue_h"] > 0
         assert set(r["errors_db"]) == set(hv.RESPONSES)
         assert np.isfinite(r["cost"]) and r["wall_s"] > 0
-        assert [s["lambda"] for s in r["sweep"]] == [1.0, 5.0, 10.0]
+        assert [s["lambda"] for s in r["sweep"]] == [1.0, 10.0]
         assert r["cost"] == min(s["unweighted"] for s in r["sweep"])
         assert (out / f"case_{r['case']}_responses.png").stat().st_size > 10_000
     # thesis 5.2.5: six HV sections fit the LV responses better than four
