@@ -417,6 +417,13 @@ _PASSIVE_6 = dict(
 )
 
 
+#: Two-winding values by source, SI units: the thesis's final estimates (Tables 5.4, 5.6, 5.9, 5.12)
+#: and this project's passive six-section re-estimate (``"passive-6"``).
+TABLES: dict[str, dict[str, float]] = {
+    "5.4": _TABLE_5_4, "5.6": _TABLE_5_6, "5.9": _TABLE_5_9, "5.12": _TABLE_5_12, "passive-6": _PASSIVE_6,
+}
+
+
 def hv_4section() -> Model:
     return two_winding(4, _TABLE_5_4, name="hv-4section",
                        description="Two-winding model, 4 HV sections, Table 5.4 (Case Study 1, 33 parameters)")

@@ -61,11 +61,11 @@ from typing import Any
 import numpy as np
 
 from pris_cosim.measured import MeasuredResponses
-from pris_cosim.models import Model, _TABLE_5_4, _TABLE_5_6, _TABLE_5_9, _TABLE_5_12, two_winding
+from pris_cosim.models import TABLES, Model, two_winding
 
 from .. import costs as _costs
 from ..executor import Task
-from ..optimisers import Budget, minimize
+from ..optimisers import minimize
 from ..parameters import ParameterSet
 from . import common
 
@@ -149,13 +149,13 @@ class CaseSpec:
 
 CASES: dict[str, CaseSpec] = {
     "1": CaseSpec("1", "Case Study 1: Brozio's wideband model, 4 HV sections (Fig. 5.11)", 4, None, False,
-                  _TABLE_5_4, (50e3, 150e3), {"cost": 0.460, "lambda": 1, "table": "5.3/5.4", "parameters": 33}),
+                  TABLES["5.4"], (50e3, 150e3), {"cost": 0.460, "lambda": 1, "table": "5.3/5.4", "parameters": 33}),
     "2a": CaseSpec("2a", "Case Study 2: extra Cab2 between the LV and HV terminals (Fig. 5.14)", 4, "terminal", False,
-                   _TABLE_5_6, (50e3, 150e3), {"cost": 0.489, "lambda": 1, "table": "5.5/5.6", "parameters": 34}),
+                   TABLES["5.6"], (50e3, 150e3), {"cost": 0.489, "lambda": 1, "table": "5.5/5.6", "parameters": 34}),
     "2b": CaseSpec("2b", "Case Study 2: Cab1, Cab2 at symmetric HV taps (Fig. 5.16)", 4, "symmetric", False,
-                   _TABLE_5_9, (100.0, 100e3), {"cost": 0.542, "lambda": 2, "table": "5.8/5.9", "parameters": 34}),
+                   TABLES["5.9"], (100.0, 100e3), {"cost": 0.542, "lambda": 2, "table": "5.8/5.9", "parameters": 34}),
     "3": CaseSpec("3", "Case Study 3: 6 HV sections, tied core coupling (Fig. 5.18)", 6, None, True,
-                  _TABLE_5_12, (100.0, 100e3), {"cost": 0.417, "lambda": 2, "table": "5.11/5.12", "parameters": 43}),
+                  TABLES["5.12"], (100.0, 100e3), {"cost": 0.417, "lambda": 2, "table": "5.11/5.12", "parameters": 43}),
 }
 
 #: What the thesis concluded, case by case (5.2.3-5.2.5).
@@ -670,8 +670,6 @@ def run(quick: bool = False, out: str | Path = "study-hv-transformer", scheduler
         Also diagnose the best case's estimate against the data (what it still gets wrong,
         :func:`diagnose_case`; a few minutes).
     """
-    from pris_cosim.models import _PASSIVE_6
-
     t0 = time.perf_counter()
     out = Path(out)
     chosen = [case_spec(c).case for c in (cases or list(CASES))]
@@ -683,7 +681,7 @@ def run(quick: bool = False, out: str | Path = "study-hv-transformer", scheduler
         truth_values = None
     else:
         data, source = lab_data(out, quick, seed, progress)
-        truth_values = dict(_PASSIVE_6)
+        truth_values = dict(TABLES["passive-6"])
     tasks = make_tasks(str(data), quick, chosen, ppd)
     results = common.run_study(NAME, tasks, out, scheduler, workers, progress)
     rows = []
