@@ -206,6 +206,7 @@ class SixResponseFit:
         self.masks = _costs.thesis_masks(self.f)
         self.n = len(self.params.varying)
         self.nfev = 0
+        self._weights: dict[float, dict[str, np.ndarray]] = {}
 
     def responses(self, U: np.ndarray) -> dict[str, np.ndarray]:
         """``{name: (P, F)}`` responses of unit-cube points ``U`` (passivity repaired)."""
@@ -232,15 +233,20 @@ class SixResponseFit:
         return fun
 
     def residual_weights(self, weight: float) -> dict[str, np.ndarray]:
-        """``sqrt(lambda_r / N_r) / psi_r`` per point (0 where masked): the residual scaling of (5.8)."""
-        cost = self.cost_function(weight)
-        out = {}
-        for r in RESPONSES:
-            m = self.masks.get(r, np.ones(self.f.size, bool))
-            lam = _costs.band_weights(self.f, _costs.TABLE_5_1_BANDS[r], weight, 1.0)
-            psi = _costs.response_range(self.target[r], cost.normalisation, m)
-            out[r] = np.where(m, np.sqrt(lam / m.sum()), 0.0) / psi
-        return out
+        """``sqrt(lambda_r / N_r) / psi_r`` per point (0 where masked): the residual scaling of (5.8).
+
+        Computed once per Lambda (the local solver asks for them at every residual evaluation).
+        """
+        key = float(weight)
+        if key not in self._weights:
+            out = {}
+            for r in RESPONSES:
+                m = self.masks.get(r, np.ones(self.f.size, bool))
+                lam = _costs.band_weights(self.f, _costs.TABLE_5_1_BANDS[r], key, 1.0)
+                psi = _costs.response_range(self.target[r], self.normalisation, m)
+                out[r] = np.where(m, np.sqrt(lam / m.sum()), 0.0) / psi
+            self._weights[key] = out
+        return self._weights[key]
 
     def residuals(self, U: np.ndarray, weight: float, phase: bool = False) -> np.ndarray:
         """``(P, 6 F)`` weighted log-magnitude errors; their squares per response sum to the squared terms of (5.8).
