@@ -32,6 +32,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from importlib import resources
 
+import numpy as np
+
 from .arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangement, source_circuit
 from .circuit import GROUND, Circuit
 from .errors import CircuitError, ExpressionError
@@ -61,6 +63,17 @@ OUT_NODE, OUT_STATE, OUT_INPUT = 0, 1, 2
 SOURCE_TERMINAL_INPUT = "Vdut"
 
 _UNITS = {"R": "Ohm", "L": "H", "C": "F", "K": "1"}
+#: ``min`` / ``max`` of parameters by unit (the FMU refuses values outside at initialisation or when set).
+PARAMETER_RANGES: dict[str, tuple[float, float]] = {
+    "Ohm": (1e-9, 1e12),
+    "H": (1e-15, 1e6),
+    "F": (1e-18, 1e3),
+    "1": (-1.0, 1.0),
+    "V": (1e-6, 1e6),
+    "Hz": (1e-3, 1e9),
+}
+#: Most PRBS switching instants one experiment may hold (checked at initialisation).
+MAX_SWITCHES = 100_000_000
 _KIND_WORDS = {"R": "resistance", "L": "inductance", "C": "capacitance", "K": "coupling coefficient"}
 
 
@@ -104,6 +117,9 @@ class Variable:
     settable: int = SET_NEVER
     exposed: bool = True
     derivative_of: int | None = None
+    min: float | int | None = None
+    max: float | int | None = None
+    nominal: float | None = None
 
 
 @dataclass
@@ -143,6 +159,12 @@ class NetworkModel:
         Element key to the Real vr holding its value.
     ties : list of str
         C statements evaluating calculated values in dependency order.
+    output_deps, derivative_deps : list of (list of int, bool)
+        Per output / state derivative: the state numbers it depends on and
+        whether it depends on the FMU input (direct feedthrough), from the
+        structure of the state-space form at the start values.
+    experiment : tuple of float or None
+        ``(stop_time, step_size)`` in s of the default experiment.
     """
 
     kind: str
@@ -159,6 +181,9 @@ class NetworkModel:
     bridge_input: int = -1
     element_vr: dict[str, int] = field(default_factory=dict)
     ties: list[str] = field(default_factory=list)
+    output_deps: list[tuple[list[int], bool]] = field(default_factory=list)
+    derivative_deps: list[tuple[list[int], bool]] = field(default_factory=list)
+    experiment: tuple[float, float] | None = None
 
     @property
     def state_vr0(self) -> int:
@@ -283,12 +308,15 @@ def _assemble(
     env = circuit.parameter_values()
     for p in parameter_order(circuit):
         if isinstance(p.value, Expression):
-            var = lay.add(p.name, causality="calculatedParameter", variability="fixed", initial="calculated",
+            var = lay.add(p.name, causality="calculatedParameter", variability="tunable", initial="calculated",
                           start=None, unit=p.unit, description=p.description or f"= {p.value.text}")
             ties.append(f"    r[{var.vr}] = {p.value.to_c(c_names)};  /* {p.name} */")
         else:
-            var = lay.add(p.name, causality="parameter", variability="fixed", initial="exact",
-                          start=float(env[p.key]), unit=p.unit, description=p.description, settable=SET_INIT)
+            lo, hi = PARAMETER_RANGES.get(p.unit, (-1e300, 1e300))
+            var = lay.add(p.name, causality="parameter", variability="tunable", initial="exact",
+                          start=float(env[p.key]), unit=p.unit,
+                          description=p.description or f"circuit parameter {p.name} ({p.unit or 'no unit'})",
+                          settable=SET_ALWAYS, min=lo, max=hi)
         c_names[p.key] = f"r[{var.vr}]"
     slots: dict[str, int] = {}
     param_keys = {p.key for p in circuit.parameters}
@@ -296,24 +324,31 @@ def _assemble(
     for e in circuit.of_kind("R", "L", "C", "K"):
         if isinstance(e.value, Expression):
             continue
+        lo, hi = PARAMETER_RANGES[_UNITS[e.kind]]
         var = lay.add(e.name if e.key not in param_keys else f"{e.name}_elem", causality="parameter",
-                      variability="fixed", initial="exact", start=float(values[e.key]), unit=_UNITS[e.kind],
-                      description=f"{_KIND_WORDS[e.kind]} of element {e.name}", settable=SET_INIT)
+                      variability="tunable", initial="exact", start=float(values[e.key]), unit=_UNITS[e.kind],
+                      description=f"{_KIND_WORDS[e.kind]} of element {e.name}", settable=SET_ALWAYS, min=lo, max=hi)
         slots[e.key] = var.vr
     if settings is not None:
         lay.add("vdc", causality="parameter", variability="tunable", initial="exact", start=float(settings.vdc),
-                unit="V", description="H-bridge DC voltage (levels +-vdc)", settable=SET_ALWAYS)
+                unit="V", description="H-bridge DC voltage (levels +-vdc)", settable=SET_ALWAYS,
+                min=PARAMETER_RANGES["V"][0], max=PARAMETER_RANGES["V"][1])
         lay.add("fclk", causality="parameter", variability="fixed", initial="exact", start=float(settings.fclk),
-                unit="Hz", description="PRBS clock frequency", settable=SET_INIT)
+                unit="Hz", description="PRBS clock frequency", settable=SET_INIT,
+                min=PARAMETER_RANGES["Hz"][0], max=PARAMETER_RANGES["Hz"][1])
         lay.add("prbs_order", "Integer", causality="parameter", variability="fixed", initial="exact",
-                start=int(settings.prbs_order), description="LFSR order n (period 2^n - 1 bits)", settable=SET_INIT)
+                start=int(settings.prbs_order), description="LFSR order n (period 2^n - 1 bits)", settable=SET_INIT,
+                min=2, max=32)
         lay.add("prbs_seed", "Integer", causality="parameter", variability="fixed", initial="exact", start=0,
-                description="LFSR seed, first n output bits MSB first; 0 = all ones", settable=SET_INIT)
+                description="LFSR seed, first n output bits MSB first; 0 = all ones", settable=SET_INIT,
+                min=0, max=2**31 - 1)
     state_vars = []
     for label in mna.states:
+        unit = "A" if label.startswith("i(") else "V"
+        what = f"current through inductor {label[2:-1]}" if unit == "A" else f"capacitive voltage {label}"
         state_vars.append(lay.add(label, causality="local", variability="continuous", initial="exact", start=0.0,
-                                  unit="A" if label.startswith("i(") else "V", description="state",
-                                  settable=SET_INIT))
+                                  unit=unit, description=f"state: {what}", settable=SET_INIT,
+                                  nominal=_state_nominal(unit, settings)))
     for sv in state_vars:
         lay.add(f"der({sv.name})", causality="local", variability="continuous", initial="calculated", start=None,
                 unit=f"{sv.unit}/s", description=f"time derivative of {sv.name}", derivative_of=sv.vr)
@@ -331,9 +366,64 @@ def _assemble(
         else:
             assert input_var is not None
             input_vrs.append(input_var.vr)
+    out_deps, der_deps = _dependencies(mna, values, outputs, input_vrs)
     return NetworkModel(kind=kind, identifier=_identifier(name), circuit=circuit, mna=mna, description=description,
                         port=port, settings=settings, real=lay.real, integer=lay.integer, outputs=outs,
-                        input_vrs=input_vrs, bridge_input=bridge, element_vr=slots, ties=ties)
+                        input_vrs=input_vrs, bridge_input=bridge, element_vr=slots, ties=ties,
+                        output_deps=out_deps, derivative_deps=der_deps,
+                        experiment=default_experiment(mna, values, settings))
+
+
+def _state_nominal(unit: str, settings: SourceSettings | None) -> float:
+    """Nominal value of a state: the bridge voltage and its current through Rpris with a source, else 1 V, 1 mA."""
+    if settings is None:
+        return 1.0 if unit == "V" else 1e-3
+    return float(settings.vdc) if unit == "V" else float(settings.vdc / settings.rpris)
+
+
+def _dependencies(mna: MNA, values: Mapping[str, float], outputs: Sequence[tuple[str, str, str, int, int]],
+                  input_vrs: Sequence[int]) -> tuple[list[tuple[list[int], bool]], list[tuple[list[int], bool]]]:
+    """Structural dependencies of outputs and derivatives on states and on the FMU input.
+
+    The FMU input enters the network through the inputs whose ``input_vrs``
+    entry is not -1 (the bridge voltage is internal).
+    """
+    ss = mna.state_space(values)
+    A, B, C, D = ss.A[0], ss.B[0], ss.C[0], ss.D[0]
+    ext = [j for j, vr in enumerate(input_vrs) if vr >= 0]
+    scale_a = np.abs(A).max(initial=0.0) or 1.0
+    scale_c = np.abs(C).max(initial=0.0) or 1.0
+
+    def row(a_row: np.ndarray, b_row: np.ndarray, scale: float) -> tuple[list[int], bool]:
+        states = [int(i) for i in np.flatnonzero(np.abs(a_row) > 1e-14 * scale)]
+        feed = bool(ext) and bool(np.any(np.abs(b_row[ext]) > 0.0))
+        return states, feed
+
+    der = [row(A[i], B[i], scale_a) for i in range(A.shape[0])]
+    out = []
+    for _, _, _, kind, index in outputs:
+        if kind == OUT_STATE:
+            out.append(([index], False))
+        elif kind == OUT_INPUT:
+            out.append(([], False))
+        else:
+            out.append(row(C[index], D[index], scale_c))
+    return out, der
+
+
+def default_experiment(mna: MNA, values: Mapping[str, float], settings: SourceSettings | None) -> tuple[float, float]:
+    """``(stop_time, step_size)`` in s: one PRBS period at 100 steps per bit with a source.
+
+    Without a source: 1000 steps of a tenth of the fastest time constant
+    (from the eigenvalues of the state matrix at the start values).
+    """
+    if settings is not None:
+        return (2 ** int(settings.prbs_order) - 1) / settings.fclk, 1.0 / (100.0 * settings.fclk)
+    lam = np.abs(np.linalg.eigvals(mna.state_space(values).A[0]))
+    lam = lam[lam > 0]
+    step = 0.1 / float(lam.max()) if lam.size else 1e-6
+    step = float(f"{step:.1e}")
+    return 1000.0 * step, step
 
 
 def _identifier(name: str) -> str:
@@ -490,7 +580,12 @@ def generate_model_c(model: NetworkModel, guid: str) -> str:
         _c_array("double", "REAL_START", [_num(v.start) if v.start is not None else "0.0" for v in real], 4),
         _c_array("char *const", "REAL_NAMES", [_c_string(v.name) for v in real], 4),
         _c_array("unsigned char", "REAL_SETTABLE", [str(v.settable) for v in real], 16),
+        _c_array("double", "REAL_MIN", [_num(v.min) if v.min is not None else "-HUGE_VAL" for v in real], 4),
+        _c_array("double", "REAL_MAX", [_num(v.max) if v.max is not None else "HUGE_VAL" for v in real], 4),
+        _c_array("double", "STATE_NOMINAL", [_num(v.nominal) for v in real if v.nominal is not None], 4),
         _c_array("int", "INT_START", [str(int(v.start)) for v in ints]),
+        _c_array("int", "INT_MIN", [str(int(v.min if v.min is not None else -2**31 + 1)) for v in ints]),
+        _c_array("int", "INT_MAX", [str(int(v.max if v.max is not None else 2**31 - 1)) for v in ints]),
         _c_array("char *const", "INT_NAMES", [_c_string(v.name) for v in ints]),
         _c_array("unsigned char", "INT_SETTABLE", [str(v.settable) for v in ints], 16),
         _elements_c("RESISTORS", mna.resistors, model, nodes),
@@ -512,8 +607,8 @@ def generate_model_c(model: NetworkModel, guid: str) -> str:
         "",
         "const prc_model PRC_MODEL = {",
         f"    {_c_string(guid)},",
-        f"    {len(real)}, REAL_START, REAL_NAMES, REAL_SETTABLE,",
-        f"    {len(ints)}, INT_START, INT_NAMES, INT_SETTABLE,",
+        f"    {len(real)}, REAL_START, REAL_NAMES, REAL_SETTABLE, REAL_MIN, REAL_MAX, STATE_NOMINAL,",
+        f"    {len(ints)}, INT_START, INT_NAMES, INT_SETTABLE, INT_MIN, INT_MAX,",
         f"    {len(nodes)},",
         f"    {len(mna.resistors)}, {len(mna.capacitors)}, {len(mna.inductors)}, {len(circuit.of_kind('K'))}, "
         f"{len(mna.vsources)},",
@@ -529,6 +624,7 @@ def generate_model_c(model: NetworkModel, guid: str) -> str:
         f"    {len(model.outputs)}, OUTPUTS,",
         f"    {_vr(model, 'vdc')}, {_vr(model, 'fclk')}, {_ivr(model, 'prbs_order')}, {_ivr(model, 'prbs_seed')},",
         "    PRBS_TAPS,",
+        f"    {float(MAX_SWITCHES)!r},",
         "    compute,",
         "};",
         "",

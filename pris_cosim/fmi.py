@@ -2,8 +2,8 @@
 
 An FMU is assembled from a :class:`~pris_cosim.codegen.NetworkModel`: the
 generated ``model.c`` plus the C runtime go into ``sources/`` (listed in the
-model description and in ``sources/buildDescription.xml`` so that any tool
-can rebuild the binary), ``modelDescription.xml`` is written here, and the
+model description, so that any tool can rebuild the binary; the binary links
+the C math library explicitly), ``modelDescription.xml`` is written here, and the
 binary is compiled with fmpy's CMake project (``fmpy/c-code``, configured by
 :func:`fmpy.build.create_cmake_settings`). Builds are cached by content hash
 in :func:`cache_dir`: the same network with the same start values is compiled
@@ -77,6 +77,10 @@ def _variable_xml(v: Variable, index_of: dict[tuple[str, int], int]) -> str:
     inner = []
     if v.unit:
         inner.append(f"unit={quoteattr(v.unit)}")
+    for attr in ("min", "max", "nominal"):
+        x = getattr(v, attr)
+        if x is not None:
+            inner.append(f'{attr}="{_fmt(x) if v.type == "Real" else int(x)}"')
     if v.start is not None:
         inner.append(f'start="{_fmt(v.start) if v.type == "Real" else int(v.start)}"')
     if v.derivative_of is not None:
@@ -115,18 +119,28 @@ def model_description(model: NetworkModel, guid: str) -> str:
     sources = "\n".join(f'      <File name="{f}"/>' for f in c_source_files())
     ident = model.identifier
     units = sorted({v.unit for v in exposed if v.unit})
-    outputs = [index_of[("Real", o.variable.vr)] for o in model.outputs]
-    derivs = [index_of[("Real", v.vr)] for v in model.real if v.derivative_of is not None]
+    state_index = [index_of[("Real", v.vr)] for v in model.real
+                   if v.nominal is not None and v.causality == "local" and v.derivative_of is None]
+    inputs = [index_of[("Real", v.vr)] for v in model.real if v.causality == "input"]
+
+    def unknown(i: int, deps: tuple[list[int], bool]) -> str:
+        states, feedthrough = deps
+        idx = [state_index[k] for k in states] + (inputs if feedthrough else [])
+        kinds = ["dependent"] * len(idx)
+        return (f'      <Unknown index="{i}" dependencies="{" ".join(map(str, idx))}" '
+                f'dependenciesKind="{" ".join(kinds)}"/>' if idx else f'      <Unknown index="{i}" dependencies=""/>')
+
+    outputs = [unknown(index_of[("Real", o.variable.vr)], d) for o, d in zip(model.outputs, model.output_deps)]
+    derivs = [unknown(index_of[("Real", v.vr)], d)
+              for v, d in zip([v for v in model.real if v.derivative_of is not None], model.derivative_deps)]
     initial = sorted(
         index_of[(v.type, v.vr)] for v in exposed
         if v.causality == "calculatedParameter" or (v.initial == "calculated" and v.causality in ("output", "local"))
     )
     experiment = ""
-    if model.settings is not None:
-        s = model.settings
-        period = (2 ** int(s.prbs_order) - 1) / s.fclk
-        experiment = (f'  <DefaultExperiment startTime="0.0" stopTime="{_fmt(period)}" '
-                      f'stepSize="{_fmt(1.0 / (100.0 * s.fclk))}"/>\n')
+    if model.experiment is not None:
+        stop, step = model.experiment
+        experiment = f'  <DefaultExperiment startTime="0.0" stopTime="{_fmt(stop)}" stepSize="{_fmt(step)}"/>\n'
     desc = model.description or model.kind
     lines = [
         '<?xml version="1.0" encoding="UTF-8"?>',
@@ -138,8 +152,8 @@ def model_description(model: NetworkModel, guid: str) -> str:
         f'  generationTool="pris_cosim {__version__}"',
         '  variableNamingConvention="flat"',
         '  numberOfEventIndicators="0">',
-        f'  <ModelExchange modelIdentifier="{ident}" canGetAndSetFMUstate="false" '
-        'canSerializeFMUstate="false" providesDirectionalDerivative="false" '
+        f'  <ModelExchange modelIdentifier="{ident}" canGetAndSetFMUstate="true" '
+        'canSerializeFMUstate="true" providesDirectionalDerivative="true" '
         'canNotUseMemoryManagementFunctions="false">',
         "    <SourceFiles>",
         sources,
@@ -147,7 +161,7 @@ def model_description(model: NetworkModel, guid: str) -> str:
         "  </ModelExchange>",
         f'  <CoSimulation modelIdentifier="{ident}" canHandleVariableCommunicationStepSize="true" '
         'canInterpolateInputs="false" maxOutputDerivativeOrder="0" canRunAsynchronuously="false" '
-        'canGetAndSetFMUstate="false" canSerializeFMUstate="false" providesDirectionalDerivative="false" '
+        'canGetAndSetFMUstate="true" canSerializeFMUstate="true" providesDirectionalDerivative="true" '
         'canNotUseMemoryManagementFunctions="false">',
         "    <SourceFiles>",
         sources,
@@ -164,10 +178,10 @@ def model_description(model: NetworkModel, guid: str) -> str:
         "  </ModelVariables>",
         "  <ModelStructure>",
         "    <Outputs>",
-        *[f'      <Unknown index="{i}"/>' for i in outputs],
+        *outputs,
         "    </Outputs>",
         "    <Derivatives>",
-        *[f'      <Unknown index="{i}"/>' for i in derivs],
+        *derivs,
         "    </Derivatives>",
         "    <InitialUnknowns>",
         *[f'      <Unknown index="{i}"/>' for i in initial],
@@ -180,7 +194,7 @@ def model_description(model: NetworkModel, guid: str) -> str:
 
 
 def build_description(model: NetworkModel) -> str:
-    """``sources/buildDescription.xml`` (the FMI 3.0 build-description format, also read for FMI 2.0.4)."""
+    """``sources/buildDescription.xml`` of an FMI 3.0 FMU (FMI 2.0 FMUs list their sources in the model description)."""
     files = "\n".join(f'      <SourceFile name="{f}"/>' for f in c_source_files())
     return (
         '<?xml version="1.0" encoding="UTF-8"?>\n'
@@ -200,7 +214,6 @@ def render(model: NetworkModel) -> dict[str, str]:
     digest = hashlib.sha256("\0".join(f"{k}\0{v}" for k, v in sorted(probe.items())).encode()).digest()
     guid = "{" + str(uuid.UUID(bytes=digest[:16], version=4)) + "}"
     files = {f"sources/{k}": v for k, v in generate_sources(model, guid).items()}
-    files[f"sources/{BUILD_DESCRIPTION}"] = build_description(model)
     files["modelDescription.xml"] = model_description(model, guid)
     return files
 
@@ -228,7 +241,9 @@ def compile_binary(unzipdir: str | os.PathLike[str], build_dir: str | os.PathLik
     with tempfile.TemporaryDirectory(prefix="pris-fmu-build-") as tmp:
         bdir = Path(build_dir) if build_dir else Path(tmp)
         bdir.mkdir(parents=True, exist_ok=True)
-        create_cmake_settings(unzipdir, bdir)
+        # the runtime calls sqrt, log2, fmax, ldexp: link the C math library explicitly (a loader
+        # that opens the binary with RTLD_LOCAL in a process without libm needs it)
+        create_cmake_settings(unzipdir, bdir, cmake_options={"CMAKE_C_STANDARD_LIBRARIES:STRING": "-lm"})
         for cmd in (["cmake", "-S", str(source_dir), "-B", str(bdir)],
                     ["cmake", "--build", str(bdir), "--target", "install", "--config", "Release"]):
             try:

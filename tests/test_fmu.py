@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.linalg
-from fmpy.model_description import read_build_description
+from fmpy.model_description import read_model_description
 from fmpy.validation import validate_fmu
 
 from pris_cosim import codegen, cosim, fmi
@@ -55,7 +55,8 @@ def test_every_fmu_validates_and_has_both_interfaces(fmus):
         assert validate_fmu(str(path)) == [], name
         with zipfile.ZipFile(path) as zf:
             names = zf.namelist()
-        assert "sources/buildDescription.xml" in names and "sources/model.c" in names, name
+        assert "sources/model.c" in names, name
+        assert "sources/buildDescription.xml" not in names, name  # FMI 2.0 lists its sources in the description
         with cosim.FmuRunner(path) as runner:
             md = runner.model_description
         assert md.coSimulation is not None and md.modelExchange is not None
@@ -198,9 +199,9 @@ def test_rebuilds_from_its_own_sources(fmus, tmp_path):
     with zipfile.ZipFile(src) as zf:
         zf.extractall(unzip)
     shutil.rmtree(unzip / "binaries")
-    configs = read_build_description(str(unzip))
-    assert configs[0].modelIdentifier == "three_pris"
-    assert sorted(configs[0].sourceFileSets[0].sourceFiles) == sorted(codegen.c_source_files())
+    md = read_model_description(str(unzip))
+    assert md.coSimulation.modelIdentifier == "three_pris"
+    assert sorted(md.buildConfigurations[0].sourceFileSets[0].sourceFiles) == sorted(codegen.c_source_files())
     fmi.compile_binary(unzip)
     with cosim.FmuRunner(unzip) as rebuilt, cosim.FmuRunner(src) as original:
         a = cosim.simulate_pris_fmu(rebuilt, THREE, 1e6)
@@ -305,3 +306,257 @@ def test_parameter_ties_are_evaluated_in_the_fmu(tmp_path):
         w = cosim.run_dut_fmu(runner, i, fs, start_values={"R0": 3e3, "L1": 2e-3})
         assert runner.instance.getReal([runner.vr("Rt")])[0] == pytest.approx(6e3, rel=1e-15)
     assert max_rel(w["v_in"], ref["v_in"]) < 1e-9 and max_rel(w["v_b"], ref["v_b"]) < 1e-9
+
+
+# ---------------------------------------------------------------------- what FMI importers rely on
+LOADER_C = r"""
+#include <dlfcn.h>
+#include <stdio.h>
+#include <string.h>
+/* Opens an FMU binary the way the FMI Library does (RTLD_NOW | RTLD_LOCAL) in a process without libm. */
+static int libm_loaded(void) {
+    char line[4096];
+    int found = 0;
+    FILE *f = fopen("/proc/self/maps", "r");
+    if (!f) return -1;
+    while (fgets(line, sizeof line, f)) if (strstr(line, "/libm.so") || strstr(line, "/libm-")) found = 1;
+    fclose(f);
+    return found;
+}
+int main(int argc, char **argv) {
+    int i;
+    void *h;
+    if (libm_loaded() != 0) { printf("libm is loaded before the FMU\n"); return 3; }
+    h = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
+    if (!h) { printf("%s\n", dlerror()); return 1; }
+    for (i = 2; i < argc; i++) if (!dlsym(h, argv[i])) { printf("missing %s\n", argv[i]); return 2; }
+    printf("ok\n");
+    return 0;
+}
+"""
+FMI2_FUNCTIONS = ["fmi2Instantiate", "fmi2DoStep", "fmi2NewDiscreteStates", "fmi2GetDirectionalDerivative",
+                  "fmi2GetFMUstate", "fmi2SerializeFMUstate"]
+SHIPPED = sorted((Path(__file__).parents[1] / "fmus").rglob("*.fmu"))
+
+
+def _binary(fmu: Path, into: Path) -> Path:
+    with zipfile.ZipFile(fmu) as zf:
+        zf.extractall(into)
+    return next((into / "binaries").rglob("*.so"))
+
+
+@pytest.mark.parametrize("which", ["built", "shipped"])
+def test_binaries_link_what_they_use(fmus, tmp_path, which):
+    """``ldd -r`` finds no undefined symbol, and a process without libm opens each binary with RTLD_LOCAL."""
+    if shutil.which("ldd") is None or shutil.which("gcc") is None:
+        pytest.skip("ldd or gcc is not installed")
+    loader = tmp_path / "loader"
+    (tmp_path / "loader.c").write_text(LOADER_C)
+    subprocess.run(["gcc", "-o", str(loader), str(tmp_path / "loader.c")], check=True)  # no -lm
+    paths = list(fmus.values()) if which == "built" else SHIPPED
+    assert paths
+    for k, fmu in enumerate(paths):
+        so = _binary(fmu, tmp_path / str(k))
+        ldd = subprocess.run(["ldd", "-r", str(so)], capture_output=True, text=True)
+        assert "undefined symbol" not in ldd.stdout + ldd.stderr, (fmu.name, ldd.stdout + ldd.stderr)
+        assert "libm.so" in ldd.stdout, fmu.name
+        run = subprocess.run([str(loader), str(so), *FMI2_FUNCTIONS], capture_output=True, text=True)
+        assert run.returncode == 0 and run.stdout.strip() == "ok", (fmu.name, run.stdout)
+
+
+@pytest.mark.parametrize("key", ["two_arrangement", "three_arrangement", "parasitic_arrangement"])
+def test_model_exchange_equals_co_simulation(fmus, key):
+    """fmpy's CVODE across the announced PRBS time events equals the exact ZOH co-simulation to 1e-4."""
+    path = fmus[key]
+    md = read_model_description(str(path))
+    stop, step = float(md.defaultExperiment.stopTime), float(md.defaultExperiment.stepSize)
+    with cosim.FmuRunner(path) as runner:
+        cs = runner.run(stop, step, output=["v_in", "i_in", "v_bprbs"])
+    with cosim.FmuRunner(path, "ModelExchange") as runner:
+        me = runner.run(stop, step, output=["v_in", "i_in", "v_bprbs"], solver="CVode", relative_tolerance=1e-8,
+                        record_events=False)
+    assert me["time"].size == cs["time"].size
+    np.testing.assert_allclose(me["time"], cs["time"], rtol=0, atol=1e-12 * stop)
+    for name in ("v_in", "i_in"):
+        assert max_rel(me[name], cs[name]) < 1e-4, name
+    np.testing.assert_array_equal(me["v_bprbs"], cs["v_bprbs"])
+
+
+def test_model_exchange_announces_switching_instants(fmus):
+    path = fmus["three_arrangement"]
+    with cosim.FmuRunner(path, "ModelExchange") as runner:
+        fmu = runner.instance
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        *_, values_changed, defined, next_time = fmu.newDiscreteStates()
+        assert defined and next_time == pytest.approx(1 / THREE.fclk, rel=1e-15)
+        changed = []
+        for bit in range(1, 2**THREE.prbs_order):
+            fmu.enterContinuousTimeMode()
+            fmu.setTime(bit / THREE.fclk)
+            fmu.completedIntegratorStep()
+            fmu.enterEventMode()
+            *_, values_changed, defined, next_time = fmu.newDiscreteStates()
+            assert defined and next_time == pytest.approx((bit + 1) / THREE.fclk, rel=1e-12)
+            changed.append(values_changed)
+    bits = np.tile(lfsr_prbs(THREE.prbs_order, 1), 2)
+    assert changed == list(bits[1:2**THREE.prbs_order] != bits[:2**THREE.prbs_order - 1])
+    assert any(changed) and not all(changed)
+
+
+def _started(runner: cosim.FmuRunner, stop: float | None = None) -> None:
+    fmu = runner.instance
+    fmu.setupExperiment(startTime=0.0, stopTime=stop)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+
+
+def test_bad_values_are_refused_with_the_reason(fmus):
+    from fmpy.fmi1 import FMICallException
+
+    with cosim.FmuRunner(fmus["three_source"]) as runner:
+        _started(runner)
+        for bad in (np.nan, np.inf, -np.inf):
+            with pytest.raises(FMICallException):
+                runner.instance.setReal([runner.vr("v_in")], [bad])
+            assert "value of 'v_in' is not finite" in runner.messages[-1]
+        runner.instance.doStep(0.0, 1e-6)
+        assert np.isfinite(runner.instance.getReal([runner.vr("i_in")])[0])
+    with cosim.FmuRunner(fmus["three_dut"]) as runner:  # the run-time rebuild keeps the last good values
+        _started(runner)
+        with pytest.raises(FMICallException):
+            runner.instance.setReal([runner.vr("Rs")], [-1.0])
+        assert "resistance must be positive" in runner.messages[-1]
+        runner.instance.setReal([runner.vr("i_in")], [1e-3])
+        runner.instance.doStep(0.0, 1e-6)
+        assert np.isfinite(runner.instance.getReal([runner.vr("v_in")])[0])
+    with cosim.FmuRunner(fmus["three_arrangement"]) as runner:
+        with pytest.raises(cosim.FmuError, match="fclk.*more than the limit"):
+            runner.run(0.4, 1e-3, start_values={"fclk": 1e9})
+        with pytest.raises(cosim.FmuError, match="outside its range"):
+            runner.run(1e-5, 1e-7, start_values={"fclk": 1e12})
+        runner.fresh()
+        with pytest.raises(FMICallException):
+            runner.instance.setupExperiment(startTime=1.0, stopTime=0.5)
+        assert "stop time 0.5 s is before the start time 1 s" in runner.messages[-1]
+
+
+def test_model_exchange_refuses_time_going_backwards(fmus):
+    from fmpy.fmi1 import FMICallException
+
+    with cosim.FmuRunner(fmus["three_arrangement"], "ModelExchange") as runner:
+        _started(runner)
+        fmu = runner.instance
+        fmu.newDiscreteStates()
+        fmu.enterContinuousTimeMode()
+        fmu.setTime(2e-6)
+        fmu.setTime(1e-6)  # a rejected integrator step may go back up to the last completed step
+        fmu.setTime(2e-6)
+        fmu.completedIntegratorStep()
+        with pytest.raises(FMICallException):
+            fmu.setTime(1.5e-6)
+        assert "before the last completed step or event" in runner.messages[-1]
+
+
+def test_model_description_declares_what_importers_need(fmus):
+    for name, path in fmus.items():
+        md = read_model_description(str(path))
+        variables = md.modelVariables
+        assert md.defaultExperiment is not None and float(md.defaultExperiment.stopTime) > 0, name
+        for v in variables:
+            assert v.description, (name, v.name)
+            if v.causality == "parameter":
+                assert v.min is not None and v.max is not None, (name, v.name)
+                assert float(v.min) <= float(v.start) <= float(v.max), (name, v.name)
+        states = [v.derivative for v in variables if v.derivative is not None]
+        assert states and all(s.nominal is not None and float(s.nominal) > 0 for s in states), name
+        for v in variables:
+            if v.name in ("Rs", "R1", "L1", "C1", "k12", "Lpris") and v.causality == "parameter":
+                assert v.variability == "tunable", (name, v.name)
+        for flag in ("canGetAndSetFMUstate", "canSerializeFMUstate", "providesDirectionalDerivative"):
+            assert getattr(md.coSimulation, flag) and getattr(md.modelExchange, flag), (name, flag)
+        for u in md.outputs + md.derivatives:
+            assert u.dependencies is not None, (name, u.variable.name)
+
+
+def test_output_dependencies_follow_the_state_space_form(fmus):
+    """The DUT port voltage has direct feedthrough exactly when no capacitor sits at the port."""
+    for key in ("three_dut", "hv_dut"):
+        md = read_model_description(str(fmus[key]))
+        i_in = next(v for v in md.modelVariables if v.name == "i_in")
+        model = {"three_dut": lambda: codegen.dut_model(get_model("three-section").circuit, "n1"),
+                 "hv_dut": lambda: codegen.dut_model(get_model("hv-4section").circuit, "a1",
+                                                     get_model("hv-4section").configuration("LVSC").shorts)}[key]()
+        ss = model.mna.state_space(model.circuit.resolve())
+        for u in md.outputs:
+            node = u.variable.name[2:] if u.variable.name != "v_in" else model.port
+            row = model.mna.nodes.index(node)
+            assert (i_in in u.dependencies) == bool(np.any(ss.D[0, row] != 0)), (key, u.variable.name)
+            states = {v.name for v in u.dependencies if v is not i_in}
+            expected = {model.mna.states[j] for j in np.flatnonzero(ss.C[0, row])}
+            assert states == expected, (key, u.variable.name)
+
+
+def test_fmu_state_rollback_and_serialisation_repeat_a_step_exactly(fmus):
+    with cosim.FmuRunner(fmus["three_arrangement"]) as runner:
+        _started(runner)
+        fmu = runner.instance
+        vr = [runner.vr("v_in"), runner.vr("i_in"), runner.vr("v_bprbs")]
+        h = 0.37 / THREE.fclk
+        for k in range(20):
+            fmu.doStep(k * h, h)
+        saved = fmu.getFMUstate()
+        blob = fmu.serializeFMUstate(saved)
+        first = []
+        for k in range(20, 60):
+            fmu.doStep(k * h, h)
+            first.append(fmu.getReal(vr))
+        for restore in (saved, fmu.deSerializeFMUstate(blob)):
+            fmu.setFMUstate(restore)
+            again = []
+            for k in range(20, 60):
+                fmu.doStep(k * h, h)
+                again.append(fmu.getReal(vr))
+            np.testing.assert_array_equal(again, first)
+        fmu.freeFMUstate(saved)
+
+
+def test_directional_derivatives_equal_the_state_space_matrices(fmus):
+    """d(der x)/d(x, u) = A, B and d(outputs)/d(x, u) = C, D of the Python reduction."""
+    three = get_model("three-section").circuit
+    model = codegen.dut_model(three, "n1", name="three_dut")
+    values = three.resolve({"Rs": 0.3})
+    ss = model.mna.state_space(values)
+    with cosim.FmuRunner(fmus["three_dut"], "ModelExchange") as runner:
+        fmu = runner.instance
+        fmu.setupExperiment(startTime=0.0)
+        fmu.setReal([runner.vr("Rs")], [0.3])
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        states = [runner.vr(s) for s in model.mna.states]
+        ders = [runner.vr(f"der({s})") for s in model.mna.states]
+        outs = [runner.vr(v.name) for v in (o.variable for o in model.outputs)]
+        rows = [model.mna.nodes.index(model.port)] + [model.mna.nodes.index(v.name[2:])
+                                                     for v in (o.variable for o in model.outputs[1:])]
+        knowns = states + [runner.vr("i_in")]
+        J = np.column_stack([fmu.getDirectionalDerivative(ders + outs, knowns, list(e))
+                             for e in np.eye(len(knowns))])
+    ref = np.block([[ss.A[0], ss.B[0]], [ss.C[0, rows], ss.D[0, rows]]])
+    np.testing.assert_allclose(J, ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
+
+
+def test_tunable_element_values_reassemble_the_model(fmus):
+    """Rs set after initialisation gives the same waveform as Rs set as a start value."""
+    fs = 1e6
+    ref = td.simulate_pris(get_model("three-section").circuit, "n1", THREE, fs, overrides={"Rs": 0.2})
+    with cosim.FmuRunner(fmus["three_arrangement"]) as runner:
+        _started(runner)
+        fmu = runner.instance
+        fmu.setReal([runner.vr("Rs")], [0.2])
+        n = ref["time_s"].size
+        got = np.empty(n)
+        for k in range(n):
+            got[k] = fmu.getReal([runner.vr("v_in")])[0]
+            fmu.doStep(k / fs, 1 / fs)
+    assert max_rel(got, ref["v_in"]) < 1e-9

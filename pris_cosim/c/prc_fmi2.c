@@ -10,7 +10,11 @@
  * expm([[A, B], [0, 0]] h) and cached per step length h. A switching instant
  * inside a step splits it there.
  * Model exchange: x' = A x + B u; switching instants are time events
- * (fmi2EventInfo.nextEventTime).
+ * (fmi2EventInfo.nextEventTime) at which the FMU reports
+ * valuesOfContinuousStatesChanged, so that integrators restart there.
+ *
+ * Inputs and parameters must be finite and inside their declared range;
+ * tunable parameters (element values, vdc) re-assemble the model when set.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -46,8 +50,12 @@ typedef struct {
     int *iv;           /* Integer variables by vr */
     int dirty;         /* parameters changed since the last build */
     double time;
+    double start_time, stop_time;  /* experiment (stop_defined: stop_time set) */
+    int stop_defined;
+    double t_committed;            /* model exchange: time may not go back before this */
     prc_net net;
     double *u, *dx, *scratch, *aug, *augexp, *work;
+    double *kx, *ku;               /* directional derivative seeds */
     int *ipiv;
     prc_disc cache[PRC_CACHE];
     int cache_next;
@@ -155,23 +163,63 @@ static int check_source(prc_inst *c, char *msg, size_t len) {
         snprintf(msg, len, "parameter 'vdc' must be positive (got %g V)", v);
         return -1;
     }
+    if (c->stop_defined && (c->stop_time - c->start_time) * f > m->max_switches) {
+        snprintf(msg, len,
+                 "parameter 'fclk' = %g Hz gives %.3g switching instants from %g s to %g s, more than the "
+                 "limit of %.3g", f, (c->stop_time - c->start_time) * f, c->start_time, c->stop_time,
+                 m->max_switches);
+        return -1;
+    }
+    return 0;
+}
+
+/* Every Real and Integer variable with a declared range inside it. */
+static int check_ranges(prc_inst *c, char *msg, size_t len) {
+    const prc_model *m = c->m;
+    int v;
+    for (v = 0; v < m->n_real; v++) {
+        double x = c->r[v];
+        if (m->real_settable[v] == PRC_SET_NEVER) continue;
+        if (!isfinite(x)) {
+            snprintf(msg, len, "variable '%s' is not finite (got %g)", m->real_names[v], x);
+            return -1;
+        }
+        if (x < m->real_min[v] || x > m->real_max[v]) {
+            snprintf(msg, len, "parameter '%s' = %g is outside its range [%g, %g]", m->real_names[v], x,
+                     m->real_min[v], m->real_max[v]);
+            return -1;
+        }
+    }
+    for (v = 0; v < m->n_int; v++)
+        if (c->iv[v] < m->int_min[v] || c->iv[v] > m->int_max[v]) {
+            snprintf(msg, len, "parameter '%s' = %d is outside its range [%d, %d]", m->int_names[v], c->iv[v],
+                     m->int_min[v], m->int_max[v]);
+            return -1;
+        }
+    return 0;
+}
+
+/* Evaluate ties, check values and rebuild the continuous model; 0 or -1 with the reason in msg. */
+static int rebuild(prc_inst *c, char *msg, size_t len) {
+    int i;
+    c->m->compute(c->r);
+    if (check_source(c, msg, len) || prc_network_build(c->m, c->r, &c->net, c->scratch, msg, len) ||
+        check_ranges(c, msg, len))
+        return -1;
+    for (i = 0; i < PRC_CACHE; i++) c->cache[i].h = 0.0;
+    c->dirty = 0;
     return 0;
 }
 
 /* Evaluate ties, check values and rebuild the continuous model when parameters changed. */
 static fmi2Status ensure_built(prc_inst *c, const char *fn) {
     char msg[MSG_LEN];
-    int i;
     if (c->state == ST_ERROR) return fail(c, fn, "the instance is in an error state; call fmi2Reset");
     if (!c->dirty) return fmi2OK;
-    c->m->compute(c->r);
-    if (check_source(c, msg, sizeof msg) ||
-        prc_network_build(c->m, c->r, &c->net, c->scratch, msg, sizeof msg)) {
+    if (rebuild(c, msg, sizeof msg)) {
         c->state = ST_ERROR;
         return fail(c, fn, "invalid parameters: %s", msg);
     }
-    for (i = 0; i < PRC_CACHE; i++) c->cache[i].h = 0.0;
-    c->dirty = 0;
     logmsg(c, fmi2OK, "logAll", "%s: model assembled (%d states)", fn, c->net.nx);
     return fmi2OK;
 }
@@ -249,7 +297,20 @@ static void restore_start(prc_inst *c) {
     if (c->m->n_int) memcpy(c->iv, c->m->int_start, sizeof(int) * (size_t)c->m->n_int);
     c->dirty = 1;
     c->time = 0.0;
+    c->start_time = 0.0;
+    c->stop_time = 0.0;
+    c->stop_defined = 0;
+    c->t_committed = 0.0;
     c->state = ST_INSTANTIATED;
+}
+
+static int is_state(const prc_model *m, int v) { return v >= m->vr_state0 && v < m->vr_state0 + nx_of(m); }
+
+static int is_input(const prc_model *m, int v) {
+    int j;
+    for (j = 0; j < nu_of(m); j++)
+        if (m->input_vr[j] == v) return 1;
+    return 0;
 }
 
 /* Time events: advance the PRBS over every switching instant up to t (tolerance tol). */
@@ -324,6 +385,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     c->augexp = (double *)alloc(c, (size_t)n * n, sizeof(double));
     c->work = (double *)alloc(c, PRC_EXPM_WORK(n), sizeof(double));
     c->ipiv = (int *)alloc(c, (size_t)n, sizeof(int));
+    c->kx = (double *)alloc(c, (size_t)nx, sizeof(double));
+    c->ku = (double *)alloc(c, (size_t)nu, sizeof(double));
     for (i = 0; i < PRC_CACHE; i++) {
         c->cache[i].Phi = (double *)alloc(c, (size_t)nx * nx, sizeof(double));
         c->cache[i].Gam = (double *)alloc(c, (size_t)nx * nu, sizeof(double));
@@ -343,7 +406,7 @@ void fmi2FreeInstance(fmi2Component comp) {
         f(c->cache[i].Gam);
     }
     f(c->r); f(c->iv); f(c->net.A); f(c->net.B); f(c->net.Cv); f(c->net.Dv);
-    f(c->u); f(c->dx); f(c->scratch); f(c->aug); f(c->augexp); f(c->work); f(c->ipiv);
+    f(c->u); f(c->dx); f(c->kx); f(c->ku); f(c->scratch); f(c->aug); f(c->augexp); f(c->work); f(c->ipiv);
     f(c->name);
     f(c);
 }
@@ -351,9 +414,17 @@ void fmi2FreeInstance(fmi2Component comp) {
 fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     prc_inst *c = (prc_inst *)comp;
-    (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
-    if (!c || c->state != ST_INSTANTIATED) return fmi2Error;
+    (void)toleranceDefined; (void)tolerance;
+    if (!c) return fmi2Error;
+    if (c->state != ST_INSTANTIATED) return fail(c, "fmi2SetupExperiment", "only allowed after instantiation");
+    if (!isfinite(startTime)) return fail(c, "fmi2SetupExperiment", "start time is not finite (got %g s)", startTime);
+    if (stopTimeDefined && !(stopTime >= startTime))
+        return fail(c, "fmi2SetupExperiment", "stop time %g s is before the start time %g s", stopTime, startTime);
     c->time = startTime;
+    c->start_time = startTime;
+    c->t_committed = startTime;
+    c->stop_defined = stopTimeDefined ? 1 : 0;
+    c->stop_time = stopTimeDefined ? stopTime : 0.0;
     return fmi2OK;
 }
 
@@ -373,6 +444,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     if (s != fmi2OK) return s;
     reset_prbs(c);
     if (has_bridge(c->m)) catch_up(c, c->time, switch_tol(c, 0.0));
+    c->t_committed = c->time;
     c->state = ST_RUN;
     return fmi2OK;
 }
@@ -471,13 +543,26 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
     m = c->m;
     for (i = 0; i < nvr; i++) {
         int v = (int)vr[i];
+        double old;
         if (v < 0 || v >= m->n_real) return fail(c, "fmi2SetReal", "unknown value reference %d", v);
         if (check_settable(c, "fmi2SetReal", m->real_settable[v], m->real_names[v]) != fmi2OK) return fmi2Error;
-        if (v == m->vr_vdc && !(isfinite(value[i]) && value[i] > 0.0))
+        if (!isfinite(value[i]))
+            return fail(c, "fmi2SetReal", "value of '%s' is not finite (got %g)", m->real_names[v], value[i]);
+        if (v == m->vr_vdc && !(value[i] > 0.0))
             return fail(c, "fmi2SetReal", "parameter 'vdc' must be positive (got %g V)", value[i]);
+        old = c->r[v];
         c->r[v] = value[i];
-        if (m->real_settable[v] == PRC_SET_INIT && (v < m->vr_state0 || v >= m->vr_state0 + nx_of(m)))
-            c->dirty = 1;
+        if (is_state(m, v) || is_input(m, v)) continue;
+        c->dirty = 1;
+        if (c->state == ST_RUN) {  /* tunable parameter: re-assemble now, keep the old value if refused */
+            char msg[MSG_LEN];
+            if (rebuild(c, msg, sizeof msg)) {
+                char dummy[MSG_LEN];
+                c->r[v] = old;
+                if (rebuild(c, dummy, sizeof dummy)) c->state = ST_ERROR;
+                return fail(c, "fmi2SetReal", "invalid parameters: %s", msg);
+            }
+        }
     }
     return fmi2OK;
 }
@@ -491,6 +576,7 @@ fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
         if (v < 0 || v >= c->m->n_int) return fail(c, "fmi2SetInteger", "unknown value reference %d", v);
         if (check_settable(c, "fmi2SetInteger", c->m->int_settable[v], c->m->int_names[v]) != fmi2OK)
             return fmi2Error;
+
         c->iv[v] = value[i];
         c->dirty = 1;
     }
@@ -509,48 +595,206 @@ fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size
     return fail((prc_inst *)comp, "fmi2SetString", "the FMU has no String variables (vr %u)", vr[0]);
 }
 
+/* A saved FMU state: every variable, the time, the life-cycle state and the PRBS generator. */
+typedef struct {
+    unsigned int magic;
+    int n_real, n_int;
+    prc_state state;
+    double time, start_time, stop_time, t_committed;
+    int stop_defined, order;
+    unsigned long long reg, mask, taps;
+    long long bit;
+} prc_saved_head;
+
+#define PRC_STATE_MAGIC 0x50524353u
+
+static size_t saved_size(const prc_model *m) {
+    return sizeof(prc_saved_head) + sizeof(double) * (size_t)m->n_real + sizeof(int) * (size_t)m->n_int;
+}
+
+static void save_to(prc_inst *c, unsigned char *buf) {
+    prc_saved_head h;
+    memset(&h, 0, sizeof h);
+    h.magic = PRC_STATE_MAGIC;
+    h.n_real = c->m->n_real;
+    h.n_int = c->m->n_int;
+    h.state = c->state;
+    h.time = c->time;
+    h.start_time = c->start_time;
+    h.stop_time = c->stop_time;
+    h.t_committed = c->t_committed;
+    h.stop_defined = c->stop_defined;
+    h.order = c->order;
+    h.reg = c->reg;
+    h.mask = c->mask;
+    h.taps = c->taps;
+    h.bit = c->bit;
+    memcpy(buf, &h, sizeof h);
+    memcpy(buf + sizeof h, c->r, sizeof(double) * (size_t)c->m->n_real);
+    memcpy(buf + sizeof h + sizeof(double) * (size_t)c->m->n_real, c->iv, sizeof(int) * (size_t)c->m->n_int);
+}
+
+/* Restore a saved state; the model is re-assembled only if a parameter differs. */
+static fmi2Status restore_from(prc_inst *c, const unsigned char *buf, const char *fn) {
+    const prc_model *m = c->m;
+    prc_saved_head h;
+    const double *r;
+    const int *iv;
+    int v, changed = 0;
+    memcpy(&h, buf, sizeof h);
+    if (h.magic != PRC_STATE_MAGIC || h.n_real != m->n_real || h.n_int != m->n_int)
+        return fail(c, fn, "the FMU state does not belong to this model");
+    r = (const double *)(buf + sizeof h);
+    iv = (const int *)(buf + sizeof h + sizeof(double) * (size_t)m->n_real);
+    for (v = 0; v < m->n_real && !changed; v++)
+        if (!is_state(m, v) && !is_input(m, v) && m->real_settable[v] != PRC_SET_NEVER && r[v] != c->r[v])
+            changed = 1;
+    for (v = 0; v < m->n_int && !changed; v++)
+        if (iv[v] != c->iv[v]) changed = 1;
+    memcpy(c->r, r, sizeof(double) * (size_t)m->n_real);
+    memcpy(c->iv, iv, sizeof(int) * (size_t)m->n_int);
+    c->state = h.state;
+    c->time = h.time;
+    c->start_time = h.start_time;
+    c->stop_time = h.stop_time;
+    c->t_committed = h.t_committed;
+    c->stop_defined = h.stop_defined;
+    c->order = h.order;
+    c->reg = h.reg;
+    c->mask = h.mask;
+    c->taps = h.taps;
+    c->bit = h.bit;
+    if (changed) c->dirty = 1;
+    return fmi2OK;
+}
+
 fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
-    (void)FMUstate;
-    return fail((prc_inst *)comp, "fmi2GetFMUstate", "not supported");
+    prc_inst *c = (prc_inst *)comp;
+    unsigned char *buf;
+    if (!c || !FMUstate) return fmi2Error;
+    buf = (unsigned char *)(*FMUstate ? *FMUstate : alloc(c, saved_size(c->m), 1));
+    if (!buf) return fail(c, "fmi2GetFMUstate", "out of memory");
+    save_to(c, buf);
+    *FMUstate = buf;
+    return fmi2OK;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
-    (void)FMUstate;
-    return fail((prc_inst *)comp, "fmi2SetFMUstate", "not supported");
+    prc_inst *c = (prc_inst *)comp;
+    if (!c) return fmi2Error;
+    if (!FMUstate) return fail(c, "fmi2SetFMUstate", "no FMU state given");
+    return restore_from(c, (const unsigned char *)FMUstate, "fmi2SetFMUstate");
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
-    (void)FMUstate;
-    return fail((prc_inst *)comp, "fmi2FreeFMUstate", "not supported");
+    prc_inst *c = (prc_inst *)comp;
+    if (!c || !FMUstate) return fmi2Error;
+    if (*FMUstate) c->cb.freeMemory(*FMUstate);
+    *FMUstate = NULL;
+    return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate FMUstate, size_t *size) {
-    (void)FMUstate; (void)size;
-    return fail((prc_inst *)comp, "fmi2SerializedFMUstateSize", "not supported");
+    prc_inst *c = (prc_inst *)comp;
+    (void)FMUstate;
+    if (!c || !size) return fmi2Error;
+    *size = saved_size(c->m);
+    return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
-    (void)FMUstate; (void)serializedState; (void)size;
-    return fail((prc_inst *)comp, "fmi2SerializeFMUstate", "not supported");
+    prc_inst *c = (prc_inst *)comp;
+    if (!c) return fmi2Error;
+    if (!FMUstate || size < saved_size(c->m))
+        return fail(c, "fmi2SerializeFMUstate", "buffer of %lu bytes is too small", (unsigned long)size);
+    memcpy(serializedState, FMUstate, saved_size(c->m));
+    return fmi2OK;
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *FMUstate) {
-    (void)serializedState; (void)size; (void)FMUstate;
-    return fail((prc_inst *)comp, "fmi2DeSerializeFMUstate", "not supported");
+    prc_inst *c = (prc_inst *)comp;
+    prc_saved_head h;
+    unsigned char *buf;
+    if (!c || !FMUstate) return fmi2Error;
+    if (size != saved_size(c->m)) return fail(c, "fmi2DeSerializeFMUstate", "wrong size %lu", (unsigned long)size);
+    memcpy(&h, serializedState, sizeof h);
+    if (h.magic != PRC_STATE_MAGIC || h.n_real != c->m->n_real || h.n_int != c->m->n_int)
+        return fail(c, "fmi2DeSerializeFMUstate", "the bytes are no FMU state of this model");
+    buf = (unsigned char *)(*FMUstate ? *FMUstate : alloc(c, size, 1));
+    if (!buf) return fail(c, "fmi2DeSerializeFMUstate", "out of memory");
+    memcpy(buf, serializedState, size);
+    *FMUstate = buf;
+    return fmi2OK;
 }
 
+/* The model is linear: d(derivatives) = A dx + B du, d(node outputs) = Cv dx + Dv du. */
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
-    (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
-    return fail((prc_inst *)comp, "fmi2GetDirectionalDerivative", "not supported");
+    prc_inst *c = (prc_inst *)comp;
+    const prc_model *m;
+    size_t i;
+    int j, nx, nu;
+    if (!c) return fmi2Error;
+    if (c->state == ST_INSTANTIATED)
+        return fail(c, "fmi2GetDirectionalDerivative", "not before initialization mode");
+    if (ensure_built(c, "fmi2GetDirectionalDerivative") != fmi2OK) return fmi2Error;
+    m = c->m;
+    nx = c->net.nx;
+    nu = c->net.nu;
+    memset(c->kx, 0, sizeof(double) * (size_t)nx);
+    memset(c->ku, 0, sizeof(double) * (size_t)nu);
+    for (i = 0; i < nKnown; i++) {
+        int v = (int)vKnown_ref[i], found = 0;
+        if (v >= 0 && is_state(m, v)) {
+            c->kx[v - m->vr_state0] += dvKnown[i];
+            found = 1;
+        }
+        for (j = 0; j < nu; j++)
+            if (m->input_vr[j] == v) {
+                c->ku[j] += dvKnown[i];
+                found = 1;
+            }
+        if (!found)
+            return fail(c, "fmi2GetDirectionalDerivative", "known vr %d is neither a state nor an input", v);
+    }
+    for (i = 0; i < nUnknown; i++) {
+        int v = (int)vUnknown_ref[i];
+        const prc_output *o;
+        const double *ra, *rb;
+        double s = 0.0;
+        if (v >= m->vr_deriv0 && v < m->vr_deriv0 + nx) {
+            ra = c->net.A + (size_t)(v - m->vr_deriv0) * nx;
+            rb = c->net.B + (size_t)(v - m->vr_deriv0) * nu;
+        } else if (is_output(m, v, &o)) {
+            if (o->kind == PRC_OUT_STATE) {
+                dvUnknown[i] = c->kx[o->index];
+                continue;
+            }
+            if (o->kind == PRC_OUT_INPUT) {
+                dvUnknown[i] = c->ku[o->index];
+                continue;
+            }
+            ra = c->net.Cv + (size_t)o->index * nx;
+            rb = c->net.Dv + (size_t)o->index * nu;
+        } else {
+            return fail(c, "fmi2GetDirectionalDerivative", "unknown vr %d is neither a derivative nor an output", v);
+        }
+        for (j = 0; j < nx; j++) s += ra[j] * c->kx[j];
+        for (j = 0; j < nu; j++) s += rb[j] * c->ku[j];
+        dvUnknown[i] = s;
+    }
+    return fmi2OK;
 }
 
 /* ------------------------------------------------------------------ model exchange */
 
 fmi2Status fmi2EnterEventMode(fmi2Component comp) {
-    return comp ? fmi2OK : fmi2Error;
+    prc_inst *c = (prc_inst *)comp;
+    if (!c) return fmi2Error;
+    c->t_committed = c->time;
+    return fmi2OK;
 }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
@@ -564,7 +808,10 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
     info->nextEventTimeDefined = fmi2False;
     info->nextEventTime = 0.0;
     if (has_bridge(c->m)) {
-        catch_up(c, c->time, switch_tol(c, 0.0));
+        /* the bridge voltage steps: the derivatives jump, so integrators must restart here */
+        int before = current_bit(c);
+        if (catch_up(c, c->time, switch_tol(c, 0.0)) && current_bit(c) != before)
+            info->valuesOfContinuousStatesChanged = fmi2True;
         info->nextEventTimeDefined = fmi2True;
         info->nextEventTime = next_switch(c);
     }
@@ -577,8 +824,10 @@ fmi2Status fmi2EnterContinuousTimeMode(fmi2Component comp) {
 
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
+    prc_inst *c = (prc_inst *)comp;
     (void)noSetFMUStatePriorToCurrentPoint;
-    if (!comp) return fmi2Error;
+    if (!c) return fmi2Error;
+    c->t_committed = c->time;
     *enterEventMode = fmi2False;
     *terminateSimulation = fmi2False;
     return fmi2OK;
@@ -587,13 +836,22 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUS
 fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
     prc_inst *c = (prc_inst *)comp;
     if (!c) return fmi2Error;
+    if (!isfinite(time)) return fail(c, "fmi2SetTime", "time is not finite (got %g s)", time);
+    if (c->state == ST_RUN && time < c->t_committed - 1e-12 * (fabs(c->t_committed) + 1e-300))
+        return fail(c, "fmi2SetTime", "time %.17g s is before the last completed step or event at %.17g s", time,
+                    c->t_committed);
     c->time = time;
     return fmi2OK;
 }
 
 fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
     prc_inst *c = (prc_inst *)comp;
+    size_t i;
     if (!c || (int)nx != nx_of(c->m)) return fmi2Error;
+    for (i = 0; i < nx; i++)
+        if (!isfinite(x[i]))
+            return fail(c, "fmi2SetContinuousStates", "state '%s' is not finite (got %g)",
+                        c->m->real_names[c->m->vr_state0 + (int)i], x[i]);
     memcpy(states(c), x, sizeof(double) * nx);
     return fmi2OK;
 }
@@ -619,9 +877,10 @@ fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) 
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real x_nominal[], size_t nx) {
+    prc_inst *c = (prc_inst *)comp;
     size_t i;
-    if (!comp) return fmi2Error;
-    for (i = 0; i < nx; i++) x_nominal[i] = 1.0;
+    if (!c || (int)nx != nx_of(c->m)) return fmi2Error;
+    for (i = 0; i < nx; i++) x_nominal[i] = c->m->state_nominal[i];
     return fmi2OK;
 }
 
@@ -648,6 +907,9 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t0, fmi2Real h, fmi2Boolean n
     if (c->state != ST_RUN) return fail(c, "fmi2DoStep", "not in step mode (initialize first)");
     if (ensure_built(c, "fmi2DoStep") != fmi2OK) return fmi2Error;
     if (!(h > 0.0)) return fail(c, "fmi2DoStep", "communication step size must be positive (got %g s)", h);
+    if (has_bridge(c->m) && h * fclk(c) > c->m->max_switches)
+        return fail(c, "fmi2DoStep", "a step of %g s holds %.3g switching instants, more than the limit of %.3g", h,
+                    h * fclk(c), c->m->max_switches);
     t = t0;
     t_end = t0 + h;
     tol = has_bridge(c->m) ? switch_tol(c, h) : 0.0;

@@ -39,10 +39,13 @@ typedef struct {
     const double *real_start;
     const char *const *real_names;
     const unsigned char *real_settable;
+    const double *real_min, *real_max;  /* declared range (+-HUGE_VAL: none) */
+    const double *state_nominal;        /* nominal value per state */
     int n_int;
     const int *int_start;
     const char *const *int_names;
     const unsigned char *int_settable;
+    const int *int_min, *int_max;
     /* network */
     int n_nodes;
     int n_r, n_c, n_l, n_k, n_v;
@@ -60,6 +63,7 @@ typedef struct {
     int vr_vdc, vr_fclk;       /* Real vrs of the source settings, -1 without bridge */
     int ivr_order, ivr_seed;   /* Integer vrs of PRBS order and seed, -1 without bridge */
     const unsigned int *prbs_taps;  /* tap mask per order 0..32 (bit t-1 set for tap t) */
+    double max_switches;            /* most PRBS switching instants one experiment may hold */
     void (*compute)(double *r);     /* evaluate parameter ties in dependency order */
 } prc_model;
 
