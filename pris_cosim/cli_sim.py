@@ -66,22 +66,25 @@ def _config_option(p: argparse.ArgumentParser) -> None:
 
 def _source_options(p: argparse.ArgumentParser, required: bool) -> None:
     d = SourceSettings()
-    for flag, dest, unit, default in (("--vdc", "vdc", "V", d.vdc), ("--fclk", "fclk", "Hz", d.fclk),
-                                      ("--rpris", "rpris", "Ohm", d.rpris), ("--lpris", "lpris", "H", d.lpris),
-                                      ("--cpris", "cpris", "F", d.cpris)):
-        p.add_argument(flag, dest=dest, type=_si, required=required, default=None if required else default,
-                       help=f"PRIS source {dest}, {unit}" + ("" if required else f" (default {default})"))
-    p.add_argument("--prbs-order", dest="prbs_order", type=int, required=required,
-                   default=None if required else d.prbs_order, help="LFSR order of the PRBS")
+    default = "the model's thesis case, else {}"
+    for flag, dest, unit, value in (("--vdc", "vdc", "V", d.vdc), ("--fclk", "fclk", "Hz", d.fclk),
+                                    ("--rpris", "rpris", "Ohm", d.rpris), ("--lpris", "lpris", "H", d.lpris),
+                                    ("--cpris", "cpris", "F", d.cpris)):
+        p.add_argument(flag, dest=dest, type=_si, required=required, default=None,
+                       help=f"PRIS source {dest}, {unit}" + ("" if required else f" (default {default.format(value)})"))
+    p.add_argument("--prbs-order", dest="prbs_order", type=int, required=required, default=None,
+                   help="LFSR order of the PRBS" + ("" if required else f" (default {default.format(d.prbs_order)})"))
     for flag, dest, unit in (("--rsnub", "rsnub", "Ohm"), ("--csnub", "csnub", "F"), ("--lsw", "lsw", "H"),
                              ("--csw", "csw", "F")):
-        p.add_argument(flag, dest=dest, type=_si, default=0.0, help=f"optional source {dest}, {unit} (default 0)")
+        p.add_argument(flag, dest=dest, type=_si, default=None,
+                       help=f"optional source {dest}, {unit} (default {'the thesis case, else ' if not required else ''}0)")
 
 
-def _settings(args: argparse.Namespace) -> SourceSettings:
-    return SourceSettings(vdc=args.vdc, prbs_order=args.prbs_order, fclk=args.fclk, rpris=args.rpris,
-                          lpris=args.lpris, cpris=args.cpris, rsnub=args.rsnub, csnub=args.csnub, lsw=args.lsw,
-                          csw=args.csw)
+def _settings(args: argparse.Namespace, base: SourceSettings | None = None) -> SourceSettings:
+    """Source settings from the options; options not given come from ``base`` (default :class:`SourceSettings`)."""
+    base = base or SourceSettings()
+    names = ("vdc", "prbs_order", "fclk", "rpris", "lpris", "cpris", "rsnub", "csnub", "lsw", "csw")
+    return SourceSettings(**{n: getattr(base, n) if getattr(args, n) is None else getattr(args, n) for n in names})
 
 
 def _port_and_shorts(circuit: Circuit, model: Model | None, args: argparse.Namespace) -> tuple[str, tuple[str, ...]]:
@@ -180,11 +183,18 @@ def cmd_build_fmu(args: argparse.Namespace) -> int:
     """``build-fmu``: write the FMUs (and .mo files); with ``--json`` print ``{"fmus": [paths]}``."""
     from .fmi import build_pris_fmus
 
+    from .thesis_cases import case_for
+
     circuit, model = load_circuit(args)
     port, shorts = _port_and_shorts(circuit, model, args)
-    settings = _settings(args) if args.with_source else None
+    case = case_for(model.name, port) if model is not None else None
+    settings = _settings(args, case.settings if case else None) if args.with_source else None
     name = _base_name(args)
-    paths = build_pris_fmus(circuit, port, args.out, settings, shorts, name=name)
+    same_prbs = case and settings and (settings.prbs_order, settings.fclk) == (case.settings.prbs_order,
+                                                                               case.settings.fclk)
+    experiment = case.experiment if same_prbs else None
+    paths = build_pris_fmus(circuit, port, args.out, settings, shorts, name=name, experiment=experiment,
+                            dut_experiment=case.experiment if case else None)
     fmus = [str(p) for p in paths.values()]
     if args.json:
         _emit({"fmus": fmus})

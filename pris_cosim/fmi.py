@@ -12,6 +12,7 @@ once. A Modelica text of the network (``NAME.mo``) is written next to each FMU.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 import shutil
@@ -323,6 +324,8 @@ def build_pris_fmus(
     settings: SourceSettings | None = None,
     shorts: Sequence[str] = (),
     name: str = "dut",
+    experiment: tuple[float, float] | None = None,
+    dut_experiment: tuple[float, float] | None = None,
 ) -> dict[str, Path]:
     """Build the DUT FMU, and with source settings also the source and monolithic FMUs.
 
@@ -338,6 +341,12 @@ def build_pris_fmus(
         DUT nodes tied to ground (test configuration).
     name : str
         Base name of the FMUs (``NAME_dut``, ``NAME_source``, ``NAME_pris``).
+    experiment : tuple of float, optional
+        ``(stop_time, step_size)`` in s of the source and arrangement FMUs'
+        default experiment (default: one PRBS period at 100 steps per bit).
+    dut_experiment : tuple of float, optional
+        The DUT FMU's default experiment (default: ``experiment``, else from
+        the network's fastest time constant).
 
     Returns
     -------
@@ -349,8 +358,13 @@ def build_pris_fmus(
     NonPassiveError
         The DUT's inductance matrix is not positive definite.
     """
-    out = {"dut": build_fmu(dut_model(dut, port, shorts, name=f"{name}_dut"), out_dir)}
+    def timed(model: NetworkModel, exp: tuple[float, float] | None) -> NetworkModel:
+        return model if exp is None else dataclasses.replace(model, experiment=(float(exp[0]), float(exp[1])))
+
+    dut_exp = dut_experiment or experiment
+    out = {"dut": build_fmu(timed(dut_model(dut, port, shorts, name=f"{name}_dut"), dut_exp), out_dir)}
     if settings is not None:
-        out["source"] = build_fmu(source_model(settings, name=f"{name}_source"), out_dir)
-        out["arrangement"] = build_fmu(arrangement_model(dut, port, settings, shorts, name=f"{name}_pris"), out_dir)
+        out["source"] = build_fmu(timed(source_model(settings, name=f"{name}_source"), experiment), out_dir)
+        out["arrangement"] = build_fmu(
+            timed(arrangement_model(dut, port, settings, shorts, name=f"{name}_pris"), experiment), out_dir)
     return out

@@ -6,11 +6,10 @@ inductors, and one ``Basic.M_Transformer`` (inductance matrix given as its
 upper triangle ``L = {L11, L12, ..., L22, ...}``) per group of inductors
 joined by K couplings. Parameters keep their names and ties; the FMU's inputs
 and outputs become ``RealInput`` / ``RealOutput`` connectors of the same
-names. The PRBS of a source is a Fibonacci LFSR in a ``when sample(...)``
-clause with the taps of :data:`pris_cosim.signals.MAX_LENGTH_TAPS`.
-
-No Modelica compiler is available in this project's environment, so the text
-is generated from the same tables as the FMU but not compiled here.
+names. The PRBS of a source is a Fibonacci LFSR: a ``when sample(...)``
+equation on ``pre(reg)`` with the taps of
+:data:`pris_cosim.signals.MAX_LENGTH_TAPS` (no algorithm section). The FMU's
+default experiment becomes the model's ``experiment`` annotation.
 """
 
 from __future__ import annotations
@@ -184,6 +183,10 @@ def modelica_text(model: NetworkModel) -> str:
         "  import SI = Modelica.Units.SI;",
     ]
     trailer = [f"end {model.identifier};", ""]
+    if model.experiment is not None:
+        stop, step = model.experiment
+        trailer.insert(0, f"  annotation(experiment(StartTime = 0.0, StopTime = {float(stop)!r}, "
+                          f"Interval = {float(step)!r}));")
     parts = header + body + (["protected", *helpers] if helpers else []) + ["equation", *eqs, *io_eqs] + trailer
     return "\n".join(parts)
 
@@ -234,15 +237,13 @@ def _interface(model: NetworkModel, inst: Mapping[str, str], pins: dict[str, lis
         elif o.kind == OUT_INPUT:
             eqs.append(f"  {v.name} = if mod(div(reg, integer(2^(prbs_order - 1))), 2) == 1 then vdc else -vdc;")
     if s is not None:
+        n_taps = len(MAX_LENGTH_TAPS[int(s.prbs_order)])
+        bits = " + ".join(f"mod(div(pre(reg), integer(2^(taps[{j}] - 1))), 2)" for j in range(1, n_taps + 1))
         eqs.append(f"  {inst[BRIDGE.lower()]}.v = v_bprbs;")
         eqs += [
-            "algorithm",
-            "  when sample(1 / fclk, 1 / fclk) then",
-            "    feedback := 0;",
-            "    for t in taps loop",
-            "      feedback := mod(feedback + mod(div(reg, integer(2^(t - 1))), 2), 2);",
-            "    end for;",
-            "    reg := mod(2 * reg + feedback, integer(2^prbs_order));",
+            "  when sample(1 / fclk, 1 / fclk) then  // one LFSR shift per clock: equations on pre(reg)",
+            f"    feedback = mod({bits}, 2);",
+            "    reg = mod(2 * pre(reg) + feedback, integer(2^prbs_order));",
             "  end when;",
         ]
     return decl, eqs

@@ -84,4 +84,5 @@ equation
   v_b2 = Cb1.n.v;
   v_b3 = Cb2.n.v;
   v_b4 = Cb3.n.v;
+  annotation(experiment(StartTime = 0.0, StopTime = 3.27675, Interval = 1e-06));
 end hv_4section_LVOC_dut;

@@ -17,13 +17,13 @@ model three_section_pris "PRIS arrangement: Three-section winding model, thesis 
   Modelica.Electrical.Analog.Basic.Capacitor C34(C = Cs);
   Modelica.Electrical.Analog.Basic.Resistor R3(R = Rs);
   Modelica.Electrical.Analog.Sources.SignalVoltage Vbridge;
-  Modelica.Electrical.Analog.Basic.Resistor Rpris(R = 31800.0);
-  Modelica.Electrical.Analog.Basic.Capacitor Cpris(C = 1e-08);
+  Modelica.Electrical.Analog.Basic.Resistor Rpris(R = 150.0);
+  Modelica.Electrical.Analog.Basic.Capacitor Cpris(C = 1e-06);
   Modelica.Electrical.Analog.Basic.M_Transformer M_L1_L2_L3(N = 3, L = {(Ls), (k12)*sqrt((Ls)*(Ls)), (k13)*sqrt((Ls)*(Ls)), (Ls), (k23)*sqrt((Ls)*(Ls)), (Ls)}) "L1, L2, L3";
-  Modelica.Electrical.Analog.Basic.Inductor Lpris(L = 2.53);
+  Modelica.Electrical.Analog.Basic.Inductor Lpris(L = 0.004);
   Modelica.Electrical.Analog.Basic.Ground ground;
-  parameter SI.Voltage vdc = 30.0 "H-bridge DC voltage (levels +-vdc)";
-  parameter SI.Frequency fclk = 10000.0 "PRBS clock frequency";
+  parameter SI.Voltage vdc = 100.0 "H-bridge DC voltage (levels +-vdc)";
+  parameter SI.Frequency fclk = 100000.0 "PRBS clock frequency";
   parameter Integer prbs_order = 12 "LFSR order n (period 2^n - 1 bits, n <= 30 here)";
   parameter Integer taps[:] = {12, 6, 4, 1} "maximal-length LFSR taps of this order";
   discrete Integer reg(start = integer(2^prbs_order) - 1, fixed = true) "next prbs_order output bits, first one in the most significant bit (all-ones seed)";
@@ -63,12 +63,9 @@ equation
   v_n2 = C12.n.v;
   v_n3 = C23.n.v;
   Vbridge.v = v_bprbs;
-algorithm
-  when sample(1 / fclk, 1 / fclk) then
-    feedback := 0;
-    for t in taps loop
-      feedback := mod(feedback + mod(div(reg, integer(2^(t - 1))), 2), 2);
-    end for;
-    reg := mod(2 * reg + feedback, integer(2^prbs_order));
+  when sample(1 / fclk, 1 / fclk) then  // one LFSR shift per clock: equations on pre(reg)
+    feedback = mod(mod(div(pre(reg), integer(2^(taps[1] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[2] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[3] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[4] - 1))), 2), 2);
+    reg = mod(2 * pre(reg) + feedback, integer(2^prbs_order));
   end when;
+  annotation(experiment(StartTime = 0.0, StopTime = 0.04095, Interval = 9.090909090909091e-08));
 end three_section_pris;

@@ -46,12 +46,9 @@ equation
   v_bprbs = if mod(div(reg, integer(2^(prbs_order - 1))), 2) == 1 then vdc else -vdc;
   v_mid = C1_1.n.v;
   Vbridge.v = v_bprbs;
-algorithm
-  when sample(1 / fclk, 1 / fclk) then
-    feedback := 0;
-    for t in taps loop
-      feedback := mod(feedback + mod(div(reg, integer(2^(t - 1))), 2), 2);
-    end for;
-    reg := mod(2 * reg + feedback, integer(2^prbs_order));
+  when sample(1 / fclk, 1 / fclk) then  // one LFSR shift per clock: equations on pre(reg)
+    feedback = mod(mod(div(pre(reg), integer(2^(taps[1] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[2] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[3] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[4] - 1))), 2), 2);
+    reg = mod(2 * pre(reg) + feedback, integer(2^prbs_order));
   end when;
+  annotation(experiment(StartTime = 0.0, StopTime = 0.3, Interval = 3.3333333333333333e-06));
 end two_section_pris;
