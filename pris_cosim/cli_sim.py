@@ -48,13 +48,15 @@ def register(sub: Any) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_simulate)
 
-    b = sub.add_parser("build-fmu", help="build FMI 2.0 FMUs (co-simulation + model exchange) of a network")
+    b = sub.add_parser("build-fmu", help="build FMI 2.0 or 3.0 FMUs (co-simulation + model exchange) of a network")
     add_circuit_options(b)
     _config_option(b)
     b.add_argument("--out", required=True, metavar="DIR", help="directory for the .fmu and .mo files")
     b.add_argument("--with-source", action="store_true",
                    help="also build the PRIS source FMU and the monolithic source+DUT FMU")
     b.add_argument("--name", help="base name of the FMUs (default: model or netlist name)")
+    b.add_argument("--fmi-version", dest="fmi_version", type=int, choices=(2, 3), default=2,
+                   help="FMI version of the FMUs (default 2)")
     _source_options(b, required=False)
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_build_fmu)
@@ -194,7 +196,7 @@ def cmd_build_fmu(args: argparse.Namespace) -> int:
                                                                                case.settings.fclk)
     experiment = case.experiment if same_prbs else None
     paths = build_pris_fmus(circuit, port, args.out, settings, shorts, name=name, experiment=experiment,
-                            dut_experiment=case.experiment if case else None)
+                            dut_experiment=case.experiment if case else None, fmi_version=args.fmi_version)
     fmus = [str(p) for p in paths.values()]
     if args.json:
         _emit({"fmus": fmus})

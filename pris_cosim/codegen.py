@@ -51,8 +51,11 @@ RUNTIME_FILES = (
     "prc_expm.c",
     "prc_network.h",
     "prc_network.c",
+    "prc_fmi2.h",
     "prc_fmi2.c",
 )
+#: Runtime files only FMI 3.0 FMUs hold (the FMI 3.0 layer over the FMI 2.0 one).
+RUNTIME_FILES_FMI3 = ("prc_fmi3.c",)
 GENERATED_FILE = "model.c"
 
 #: When a variable may be set (``PRC_SET_*`` in prc_model.h).
@@ -640,19 +643,23 @@ def _ivr(model: NetworkModel, name: str) -> int:
     return next((v.vr for v in model.integer if v.name == name), -1)
 
 
-def runtime_sources() -> dict[str, str]:
-    """The hand-written C runtime files, by file name."""
+def _runtime_names(fmi_version: int) -> tuple[str, ...]:
+    return RUNTIME_FILES + (RUNTIME_FILES_FMI3 if fmi_version == 3 else ())
+
+
+def runtime_sources(fmi_version: int = 2) -> dict[str, str]:
+    """The hand-written C runtime files of an FMI 2.0 or 3.0 FMU, by file name."""
     pkg = resources.files("pris_cosim") / "c"
-    return {name: (pkg / name).read_text() for name in RUNTIME_FILES}
+    return {name: (pkg / name).read_text() for name in _runtime_names(fmi_version)}
 
 
-def generate_sources(model: NetworkModel, guid: str) -> dict[str, str]:
+def generate_sources(model: NetworkModel, guid: str, fmi_version: int = 2) -> dict[str, str]:
     """Every source file of the FMU (runtime plus generated ``model.c``), by file name."""
-    files = runtime_sources()
+    files = runtime_sources(fmi_version)
     files[GENERATED_FILE] = generate_model_c(model, guid)
     return files
 
 
-def c_source_files() -> list[str]:
+def c_source_files(fmi_version: int = 2) -> list[str]:
     """Names of the C files to compile, in build order."""
-    return [f for f in RUNTIME_FILES if f.endswith(".c")] + [GENERATED_FILE]
+    return [f for f in _runtime_names(fmi_version) if f.endswith(".c")] + [GENERATED_FILE]

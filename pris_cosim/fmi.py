@@ -1,4 +1,4 @@
-"""Build FMI 2.0 FMUs (Co-Simulation and Model Exchange in one) from circuit descriptions.
+"""Build FMI 2.0 and 3.0 FMUs (Co-Simulation and Model Exchange in one) from circuit descriptions.
 
 An FMU is assembled from a :class:`~pris_cosim.codegen.NetworkModel`: the
 generated ``model.c`` plus the C runtime go into ``sources/`` (listed in the
@@ -194,28 +194,29 @@ def model_description(model: NetworkModel, guid: str) -> str:
     return "\n".join(line for line in lines if line != "")
 
 
-def build_description(model: NetworkModel) -> str:
-    """``sources/buildDescription.xml`` of an FMI 3.0 FMU (FMI 2.0 FMUs list their sources in the model description)."""
-    files = "\n".join(f'      <SourceFile name="{f}"/>' for f in c_source_files())
-    return (
-        '<?xml version="1.0" encoding="UTF-8"?>\n'
-        '<fmiBuildDescription fmiVersion="3.0">\n'
-        f'  <BuildConfiguration modelIdentifier="{model.identifier}">\n'
-        '    <SourceFileSet language="C99">\n'
-        f"{files}\n"
-        "    </SourceFileSet>\n"
-        "  </BuildConfiguration>\n"
-        "</fmiBuildDescription>\n"
-    )
+def _description(model: NetworkModel, guid: str, fmi_version: int) -> str:
+    if fmi_version == 3:
+        from .fmi3_xml import model_description3
+
+        exposed = [v for v in model.real if v.exposed] + [v for v in model.integer if v.exposed]
+        return model_description3(model, guid, _unit_xml(sorted({v.unit for v in exposed if v.unit})))
+    return model_description(model, guid)
 
 
-def render(model: NetworkModel) -> dict[str, str]:
-    """Every text file of the FMU by archive path, with a GUID derived from the content."""
-    probe = generate_sources(model, "GUID") | {"modelDescription.xml": model_description(model, "GUID")}
+def render(model: NetworkModel, fmi_version: int = 2) -> dict[str, str]:
+    """Every text file of the FMU (FMI 2.0 or 3.0) by archive path, with a GUID derived from the content."""
+    if fmi_version not in (2, 3):
+        raise ValueError(f"FMI version must be 2 or 3 (got {fmi_version!r})")
+    probe = generate_sources(model, "GUID", fmi_version) | {"modelDescription.xml": _description(model, "GUID",
+                                                                                                 fmi_version)}
     digest = hashlib.sha256("\0".join(f"{k}\0{v}" for k, v in sorted(probe.items())).encode()).digest()
     guid = "{" + str(uuid.UUID(bytes=digest[:16], version=4)) + "}"
-    files = {f"sources/{k}": v for k, v in generate_sources(model, guid).items()}
-    files["modelDescription.xml"] = model_description(model, guid)
+    files = {f"sources/{k}": v for k, v in generate_sources(model, guid, fmi_version).items()}
+    files["modelDescription.xml"] = _description(model, guid, fmi_version)
+    if fmi_version == 3:
+        from .fmi3_xml import build_description3
+
+        files[f"sources/{BUILD_DESCRIPTION}"] = build_description3(model)
     return files
 
 
@@ -265,7 +266,7 @@ def _write_zip(src: Path, target: Path) -> None:
 
 
 def build_fmu(model: NetworkModel, out_dir: str | os.PathLike[str], *, use_cache: bool = True,
-              write_modelica: bool = True) -> Path:
+              write_modelica: bool = True, fmi_version: int = 2) -> Path:
     """Build (or fetch from the cache) the FMU of a network model.
 
     Parameters
@@ -279,6 +280,8 @@ def build_fmu(model: NetworkModel, out_dir: str | os.PathLike[str], *, use_cache
         Reuse a cached build of identical content.
     write_modelica : bool
         Also write the Modelica text of the network.
+    fmi_version : {2, 3}
+        FMI 2.0 or FMI 3.0 (Co-Simulation and Model Exchange either way).
 
     Returns
     -------
@@ -287,7 +290,7 @@ def build_fmu(model: NetworkModel, out_dir: str | os.PathLike[str], *, use_cache
     """
     import fmpy
 
-    files = render(model)
+    files = render(model, fmi_version)
     key = hashlib.sha256()
     for name in sorted(files):
         key.update(name.encode() + b"\0" + files[name].encode() + b"\0")
@@ -326,6 +329,7 @@ def build_pris_fmus(
     name: str = "dut",
     experiment: tuple[float, float] | None = None,
     dut_experiment: tuple[float, float] | None = None,
+    fmi_version: int = 2,
 ) -> dict[str, Path]:
     """Build the DUT FMU, and with source settings also the source and monolithic FMUs.
 
@@ -347,6 +351,8 @@ def build_pris_fmus(
     dut_experiment : tuple of float, optional
         The DUT FMU's default experiment (default: ``experiment``, else from
         the network's fastest time constant).
+    fmi_version : {2, 3}
+        FMI 2.0 or FMI 3.0 FMUs.
 
     Returns
     -------
@@ -362,9 +368,12 @@ def build_pris_fmus(
         return model if exp is None else dataclasses.replace(model, experiment=(float(exp[0]), float(exp[1])))
 
     dut_exp = dut_experiment or experiment
-    out = {"dut": build_fmu(timed(dut_model(dut, port, shorts, name=f"{name}_dut"), dut_exp), out_dir)}
+    v = fmi_version
+    out = {"dut": build_fmu(timed(dut_model(dut, port, shorts, name=f"{name}_dut"), dut_exp), out_dir, fmi_version=v)}
     if settings is not None:
-        out["source"] = build_fmu(timed(source_model(settings, name=f"{name}_source"), experiment), out_dir)
+        out["source"] = build_fmu(timed(source_model(settings, name=f"{name}_source"), experiment), out_dir,
+                                  fmi_version=v)
         out["arrangement"] = build_fmu(
-            timed(arrangement_model(dut, port, settings, shorts, name=f"{name}_pris"), experiment), out_dir)
+            timed(arrangement_model(dut, port, settings, shorts, name=f"{name}_pris"), experiment), out_dir,
+            fmi_version=v)
     return out

@@ -22,7 +22,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fmi2Functions.h"
+#include "prc_fmi2.h"
 #include "prc_expm.h"
 #include "prc_linalg.h"
 #include "prc_model.h"
@@ -332,10 +332,10 @@ static double switch_tol(prc_inst *c, double h) {
 
 /* ------------------------------------------------------------------ common functions */
 
-const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
-const char *fmi2GetVersion(void) { return fmi2Version; }
+const char *PRC2(fmi2GetTypesPlatform)(void) { return fmi2TypesPlatform; }
+const char *PRC2(fmi2GetVersion)(void) { return fmi2Version; }
 
-fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn, size_t nCategories,
+fmi2Status PRC2(fmi2SetDebugLogging)(fmi2Component comp, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[]) {
     prc_inst *c = (prc_inst *)comp;
     (void)nCategories;
@@ -345,7 +345,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn, size_t
     return fmi2OK;
 }
 
-fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+fmi2Component PRC2(fmi2Instantiate)(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
     const prc_model *m = &PRC_MODEL;
@@ -395,7 +395,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     return c;
 }
 
-void fmi2FreeInstance(fmi2Component comp) {
+void PRC2(fmi2FreeInstance)(fmi2Component comp) {
     prc_inst *c = (prc_inst *)comp;
     fmi2CallbackFreeMemory f;
     int i;
@@ -411,7 +411,7 @@ void fmi2FreeInstance(fmi2Component comp) {
     f(c);
 }
 
-fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+fmi2Status PRC2(fmi2SetupExperiment)(fmi2Component comp, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     prc_inst *c = (prc_inst *)comp;
     (void)toleranceDefined; (void)tolerance;
@@ -428,14 +428,14 @@ fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined,
     return fmi2OK;
 }
 
-fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
+fmi2Status PRC2(fmi2EnterInitializationMode)(fmi2Component comp) {
     prc_inst *c = (prc_inst *)comp;
     if (!c || c->state != ST_INSTANTIATED) return fmi2Error;
     c->state = ST_INIT;
     return fmi2OK;
 }
 
-fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
+fmi2Status PRC2(fmi2ExitInitializationMode)(fmi2Component comp) {
     prc_inst *c = (prc_inst *)comp;
     fmi2Status s;
     if (!c) return fmi2Error;
@@ -449,14 +449,14 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     return fmi2OK;
 }
 
-fmi2Status fmi2Terminate(fmi2Component comp) {
+fmi2Status PRC2(fmi2Terminate)(fmi2Component comp) {
     prc_inst *c = (prc_inst *)comp;
     if (!c) return fmi2Error;
     c->state = ST_TERMINATED;
     return fmi2OK;
 }
 
-fmi2Status fmi2Reset(fmi2Component comp) {
+fmi2Status PRC2(fmi2Reset)(fmi2Component comp) {
     prc_inst *c = (prc_inst *)comp;
     if (!c) return fmi2Error;
     restore_start(c);
@@ -473,7 +473,7 @@ static int is_output(const prc_model *m, int vr, const prc_output **o) {
     return 0;
 }
 
-fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
+fmi2Status PRC2(fmi2GetReal)(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
     prc_inst *c = (prc_inst *)comp;
     const prc_model *m;
     size_t i;
@@ -505,7 +505,7 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
     return fmi2OK;
 }
 
-fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
+fmi2Status PRC2(fmi2GetInteger)(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[]) {
     prc_inst *c = (prc_inst *)comp;
     size_t i;
     if (!c) return fmi2Error;
@@ -516,13 +516,13 @@ fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
     return fmi2OK;
 }
 
-fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
+fmi2Status PRC2(fmi2GetBoolean)(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[]) {
     (void)value;
     if (nvr == 0) return fmi2OK;
     return fail((prc_inst *)comp, "fmi2GetBoolean", "the FMU has no Boolean variables (vr %u)", vr[0]);
 }
 
-fmi2Status fmi2GetString(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
+fmi2Status PRC2(fmi2GetString)(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
     (void)value;
     if (nvr == 0) return fmi2OK;
     return fail((prc_inst *)comp, "fmi2GetString", "the FMU has no String variables (vr %u)", vr[0]);
@@ -535,7 +535,7 @@ static fmi2Status check_settable(prc_inst *c, const char *fn, unsigned char how,
     return fail(c, fn, "variable '%s' can only be set before the end of initialization", name);
 }
 
-fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
+fmi2Status PRC2(fmi2SetReal)(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
     prc_inst *c = (prc_inst *)comp;
     const prc_model *m;
     size_t i;
@@ -567,7 +567,7 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
     return fmi2OK;
 }
 
-fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
+fmi2Status PRC2(fmi2SetInteger)(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[]) {
     prc_inst *c = (prc_inst *)comp;
     size_t i;
     if (!c) return fmi2Error;
@@ -583,13 +583,13 @@ fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
     return fmi2OK;
 }
 
-fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
+fmi2Status PRC2(fmi2SetBoolean)(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[]) {
     (void)value;
     if (nvr == 0) return fmi2OK;
     return fail((prc_inst *)comp, "fmi2SetBoolean", "the FMU has no Boolean variables (vr %u)", vr[0]);
 }
 
-fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
+fmi2Status PRC2(fmi2SetString)(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
     (void)value;
     if (nvr == 0) return fmi2OK;
     return fail((prc_inst *)comp, "fmi2SetString", "the FMU has no String variables (vr %u)", vr[0]);
@@ -668,7 +668,7 @@ static fmi2Status restore_from(prc_inst *c, const unsigned char *buf, const char
     return fmi2OK;
 }
 
-fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
+fmi2Status PRC2(fmi2GetFMUstate)(fmi2Component comp, fmi2FMUstate *FMUstate) {
     prc_inst *c = (prc_inst *)comp;
     unsigned char *buf;
     if (!c || !FMUstate) return fmi2Error;
@@ -679,14 +679,14 @@ fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     return fmi2OK;
 }
 
-fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
+fmi2Status PRC2(fmi2SetFMUstate)(fmi2Component comp, fmi2FMUstate FMUstate) {
     prc_inst *c = (prc_inst *)comp;
     if (!c) return fmi2Error;
     if (!FMUstate) return fail(c, "fmi2SetFMUstate", "no FMU state given");
     return restore_from(c, (const unsigned char *)FMUstate, "fmi2SetFMUstate");
 }
 
-fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
+fmi2Status PRC2(fmi2FreeFMUstate)(fmi2Component comp, fmi2FMUstate *FMUstate) {
     prc_inst *c = (prc_inst *)comp;
     if (!c || !FMUstate) return fmi2Error;
     if (*FMUstate) c->cb.freeMemory(*FMUstate);
@@ -694,7 +694,7 @@ fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     return fmi2OK;
 }
 
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate FMUstate, size_t *size) {
+fmi2Status PRC2(fmi2SerializedFMUstateSize)(fmi2Component comp, fmi2FMUstate FMUstate, size_t *size) {
     prc_inst *c = (prc_inst *)comp;
     (void)FMUstate;
     if (!c || !size) return fmi2Error;
@@ -702,7 +702,7 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate FMUstate,
     return fmi2OK;
 }
 
-fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
+fmi2Status PRC2(fmi2SerializeFMUstate)(fmi2Component comp, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
     prc_inst *c = (prc_inst *)comp;
     if (!c) return fmi2Error;
     if (!FMUstate || size < saved_size(c->m))
@@ -711,7 +711,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate FMUstate, fmi2
     return fmi2OK;
 }
 
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serializedState[], size_t size,
+fmi2Status PRC2(fmi2DeSerializeFMUstate)(fmi2Component comp, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *FMUstate) {
     prc_inst *c = (prc_inst *)comp;
     prc_saved_head h;
@@ -729,7 +729,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serialized
 }
 
 /* The model is linear: d(derivatives) = A dx + B du, d(node outputs) = Cv dx + Dv du. */
-fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+fmi2Status PRC2(fmi2GetDirectionalDerivative)(fmi2Component comp, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
     prc_inst *c = (prc_inst *)comp;
@@ -790,14 +790,14 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueRefer
 
 /* ------------------------------------------------------------------ model exchange */
 
-fmi2Status fmi2EnterEventMode(fmi2Component comp) {
+fmi2Status PRC2(fmi2EnterEventMode)(fmi2Component comp) {
     prc_inst *c = (prc_inst *)comp;
     if (!c) return fmi2Error;
     c->t_committed = c->time;
     return fmi2OK;
 }
 
-fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
+fmi2Status PRC2(fmi2NewDiscreteStates)(fmi2Component comp, fmi2EventInfo *info) {
     prc_inst *c = (prc_inst *)comp;
     if (!c) return fmi2Error;
     if (ensure_built(c, "fmi2NewDiscreteStates") != fmi2OK) return fmi2Error;
@@ -818,11 +818,11 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
     return fmi2OK;
 }
 
-fmi2Status fmi2EnterContinuousTimeMode(fmi2Component comp) {
+fmi2Status PRC2(fmi2EnterContinuousTimeMode)(fmi2Component comp) {
     return comp ? fmi2OK : fmi2Error;
 }
 
-fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+fmi2Status PRC2(fmi2CompletedIntegratorStep)(fmi2Component comp, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
     prc_inst *c = (prc_inst *)comp;
     (void)noSetFMUStatePriorToCurrentPoint;
@@ -833,7 +833,7 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUS
     return fmi2OK;
 }
 
-fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
+fmi2Status PRC2(fmi2SetTime)(fmi2Component comp, fmi2Real time) {
     prc_inst *c = (prc_inst *)comp;
     if (!c) return fmi2Error;
     if (!isfinite(time)) return fail(c, "fmi2SetTime", "time is not finite (got %g s)", time);
@@ -844,7 +844,7 @@ fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
     return fmi2OK;
 }
 
-fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
+fmi2Status PRC2(fmi2SetContinuousStates)(fmi2Component comp, const fmi2Real x[], size_t nx) {
     prc_inst *c = (prc_inst *)comp;
     size_t i;
     if (!c || (int)nx != nx_of(c->m)) return fmi2Error;
@@ -856,7 +856,7 @@ fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_
     return fmi2OK;
 }
 
-fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivs[], size_t nx) {
+fmi2Status PRC2(fmi2GetDerivatives)(fmi2Component comp, fmi2Real derivs[], size_t nx) {
     prc_inst *c = (prc_inst *)comp;
     if (!c || (int)nx != nx_of(c->m)) return fmi2Error;
     if (ensure_built(c, "fmi2GetDerivatives") != fmi2OK) return fmi2Error;
@@ -864,19 +864,19 @@ fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivs[], size_t nx) 
     return fmi2OK;
 }
 
-fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real eventIndicators[], size_t ni) {
+fmi2Status PRC2(fmi2GetEventIndicators)(fmi2Component comp, fmi2Real eventIndicators[], size_t ni) {
     (void)eventIndicators;
     return comp && ni == 0 ? fmi2OK : fmi2Error;
 }
 
-fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) {
+fmi2Status PRC2(fmi2GetContinuousStates)(fmi2Component comp, fmi2Real x[], size_t nx) {
     prc_inst *c = (prc_inst *)comp;
     if (!c || (int)nx != nx_of(c->m)) return fmi2Error;
     memcpy(x, states(c), sizeof(double) * nx);
     return fmi2OK;
 }
 
-fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real x_nominal[], size_t nx) {
+fmi2Status PRC2(fmi2GetNominalsOfContinuousStates)(fmi2Component comp, fmi2Real x_nominal[], size_t nx) {
     prc_inst *c = (prc_inst *)comp;
     size_t i;
     if (!c || (int)nx != nx_of(c->m)) return fmi2Error;
@@ -886,19 +886,19 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real x_nomi
 
 /* ------------------------------------------------------------------ co-simulation */
 
-fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status PRC2(fmi2SetRealInputDerivatives)(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[]) {
     (void)vr; (void)nvr; (void)order; (void)value;
     return fail((prc_inst *)comp, "fmi2SetRealInputDerivatives", "inputs are held constant (zero-order hold)");
 }
 
-fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
+fmi2Status PRC2(fmi2GetRealOutputDerivatives)(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
                                         const fmi2Integer order[], fmi2Real value[]) {
     (void)vr; (void)nvr; (void)order; (void)value;
     return fail((prc_inst *)comp, "fmi2GetRealOutputDerivatives", "not supported");
 }
 
-fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t0, fmi2Real h, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
+fmi2Status PRC2(fmi2DoStep)(fmi2Component comp, fmi2Real t0, fmi2Real h, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
     prc_inst *c = (prc_inst *)comp;
     double t, t_end, tol;
     int first = 1;
@@ -937,16 +937,16 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t0, fmi2Real h, fmi2Boolean n
     return fmi2OK;
 }
 
-fmi2Status fmi2CancelStep(fmi2Component comp) {
+fmi2Status PRC2(fmi2CancelStep)(fmi2Component comp) {
     return fail((prc_inst *)comp, "fmi2CancelStep", "doStep is never asynchronous");
 }
 
-fmi2Status fmi2GetStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Status *value) {
+fmi2Status PRC2(fmi2GetStatus)(fmi2Component comp, const fmi2StatusKind s, fmi2Status *value) {
     (void)s; (void)value;
     return comp ? fmi2Discard : fmi2Error;
 }
 
-fmi2Status fmi2GetRealStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Real *value) {
+fmi2Status PRC2(fmi2GetRealStatus)(fmi2Component comp, const fmi2StatusKind s, fmi2Real *value) {
     prc_inst *c = (prc_inst *)comp;
     if (!c) return fmi2Error;
     if (s == fmi2LastSuccessfulTime) {
@@ -956,12 +956,12 @@ fmi2Status fmi2GetRealStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Rea
     return fmi2Discard;
 }
 
-fmi2Status fmi2GetIntegerStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Integer *value) {
+fmi2Status PRC2(fmi2GetIntegerStatus)(fmi2Component comp, const fmi2StatusKind s, fmi2Integer *value) {
     (void)s; (void)value;
     return comp ? fmi2Discard : fmi2Error;
 }
 
-fmi2Status fmi2GetBooleanStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Boolean *value) {
+fmi2Status PRC2(fmi2GetBooleanStatus)(fmi2Component comp, const fmi2StatusKind s, fmi2Boolean *value) {
     if (!comp) return fmi2Error;
     if (s == fmi2Terminated) {
         *value = fmi2False;
@@ -970,7 +970,11 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component comp, const fmi2StatusKind s, fmi2
     return fmi2Discard;
 }
 
-fmi2Status fmi2GetStringStatus(fmi2Component comp, const fmi2StatusKind s, fmi2String *value) {
+fmi2Status PRC2(fmi2GetStringStatus)(fmi2Component comp, const fmi2StatusKind s, fmi2String *value) {
     (void)s; (void)value;
     return comp ? fmi2Discard : fmi2Error;
 }
+
+#ifdef PRC_FMI3
+double prc2_time(fmi2Component comp) { return comp ? ((prc_inst *)comp)->time : 0.0; }
+#endif
