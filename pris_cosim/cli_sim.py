@@ -192,6 +192,8 @@ def _simulate_cosim(circuit: Circuit, port: str, settings: SourceSettings, short
     from .cosim_exact import cosimulate_exact
     from .fmi import build_fmu
 
+    if args.probe:
+        raise UsageError("--probe is not available with --engine cosim (the master records v_in, i_in, v_bprbs)")
     base = _base_name(args)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="pris-cosim-") as tmp:
