@@ -192,8 +192,6 @@ def _simulate_cosim(circuit: Circuit, port: str, settings: SourceSettings, short
     from .cosim_exact import cosimulate_exact
     from .fmi import build_fmu
 
-    if args.probe:
-        raise UsageError("--probe is not available with --engine cosim (the master records v_in, i_in, v_bprbs)")
     base = _base_name(args)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="pris-cosim-") as tmp:
@@ -203,7 +201,9 @@ def _simulate_cosim(circuit: Circuit, port: str, settings: SourceSettings, short
         build_s = time.perf_counter() - t0
         t1 = time.perf_counter()
         with FmuRunner(src, "ModelExchange") as s_run, FmuRunner(dut, "ModelExchange") as d_run:
-            w, err = cosimulate_exact(s_run, d_run, args.fs, pris_samples(settings, args.fs, args.periods))
+            probes = [f"v_{args.probe}"] if args.probe else []
+            w, err = cosimulate_exact(s_run, d_run, args.fs, pris_samples(settings, args.fs, args.periods),
+                                      probes=probes)
     info: dict[str, Any] = {"build_s": build_s, "run_s": time.perf_counter() - t1, "coupling_error": err}
     if args.fmu_dir:
         info["fmus"] = [str(src), str(dut)]

@@ -23,7 +23,7 @@ is not linear time-invariant).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from ctypes import POINTER, c_double
 
 import numpy as np
@@ -128,6 +128,7 @@ def cosimulate_exact(
     n_samples: int,
     source_values: Mapping[str, float] | None = None,
     dut_values: Mapping[str, float] | None = None,
+    probes: Sequence[str] = (),
 ) -> tuple[dict[str, np.ndarray], float]:
     """Exact co-simulation of a source FMU and a winding FMU (both Model Exchange instances).
 
@@ -142,11 +143,13 @@ def cosimulate_exact(
     n_samples : int
     source_values, dut_values : mapping, optional
         Parameter values by FMU variable name.
+    probes : sequence of str
+        Further outputs of the winding FMU to record (e.g. ``v_n3``), V.
 
     Returns
     -------
     waveforms : dict
-        ``time_s``, ``v_bprbs``, ``v_in`` (V), ``i_in`` (A).
+        ``time_s``, ``v_bprbs``, ``v_in`` (V), ``i_in`` (A) and the probes.
     coupling_error : float
         Largest relative difference, at the events, between the FMUs' own
         outputs and the master's exact prediction (dimensionless).
@@ -158,7 +161,7 @@ def cosimulate_exact(
     n = int(n_samples)
     stop = (n - 1) * h
     S = _Unit(source, "v_in", ["i_in", "v_bprbs"])
-    W = _Unit(dut, "i_in", ["v_in"])
+    W = _Unit(dut, "i_in", ["v_in", *probes])
     try:
         t_next = S.start(stop, source_values)
         t_dut = W.start(stop, dut_values)
@@ -207,7 +210,7 @@ def cosimulate_exact(
         Bblk[ns:, 1] = Bw[:, 0]
         Dblk = np.array([Ds[0, 0], Dw[0, 0]])
 
-        def forcing(z: np.ndarray, u_guess: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        def forcing(z: np.ndarray, u_guess: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
             """Interface inputs u = K z + k, the forcing g and the bridge voltage, from one FMU evaluation each.
 
             Both FMUs are affine in their input, so one evaluation at a guess
@@ -220,11 +223,12 @@ def cosimulate_exact(
             e = y - Cblk @ z - Dblk[::-1] * u_guess[::-1]
             u = K @ z + np.linalg.solve(Wm, e)
             d = np.concatenate([ds, dw]) + Bblk @ (u - u_guess)
-            return u, d - J @ z, float(ys[1])
+            probe_offset = yw[1:] - Cw[1:] @ z[ns:] - Dw[1:, 0] * u_guess[1]
+            return u, d - J @ z, float(ys[1]), probe_offset
 
-        out = np.empty((n, 3))
+        out = np.empty((n, 3 + len(probes)))
         k, t0, err = 0, 0.0, 0.0
-        u, g, vb = forcing(z, np.zeros(2))
+        u, g, vb, ep = forcing(z, np.zeros(2))
         check_every, event_no = 1, 0
         while k < n:
             last = t_next is None or t_next > stop * (1 + 1e-12)
@@ -235,7 +239,9 @@ def cosimulate_exact(
                 Ps, Qs = block(k, k_end, t0)
                 Z = Ps @ z + Qs @ g
                 U = Z @ K.T + offset
-                out[k:k_end + 1] = np.column_stack([np.full(U.shape[0], vb), U[:, 0], U[:, 1]])
+                out[k:k_end + 1, :3] = np.column_stack([np.full(U.shape[0], vb), U[:, 0], U[:, 1]])
+                if probes:
+                    out[k:k_end + 1, 3:] = Z[:, ns:] @ Cw[1:].T + np.outer(U[:, 1], Dw[1:, 0]) + ep
                 k = k_end + 1
             if last:
                 break
@@ -243,7 +249,7 @@ def cosimulate_exact(
             offset = u - K @ z
             z = P @ z + Q @ g
             if event_no % check_every == 0:  # the FMUs' own view of the exact state, before the event
-                u_fmu, g_fmu, _ = forcing(z, K @ z + offset)
+                u_fmu, g_fmu, _, _ = forcing(z, K @ z + offset)
                 du = np.abs(u_fmu - (K @ z + offset)).max() / max(np.abs(u_fmu).max(), 1e-300)
                 dg = np.abs(g_fmu - g).max() / max(np.abs(J @ z + g).max(), 1e-300)
                 err = max(err, float(du), float(dg))
@@ -253,10 +259,11 @@ def cosimulate_exact(
             t0 = t_next
             t_next = S.event(t0, z[:ns])
             W.event(t0, z[ns:])
-            u, g, vb = forcing(z, K @ z + offset)
+            u, g, vb, ep = forcing(z, K @ z + offset)
     except FmuError:
         raise
     except Exception as exc:
         raise FmuError(f"exact co-simulation failed: {exc}") from None
     waves = {"time_s": np.arange(n) * h, "v_bprbs": out[:, 0], "v_in": out[:, 1], "i_in": out[:, 2]}
+    waves.update({p: out[:, 3 + j] for j, p in enumerate(probes)})
     return waves, err

@@ -31,9 +31,9 @@ def test_exact_coupling_equals_the_exact_engine(tmp_path, fs, periods):
     dut = fmi.build_fmu(codegen.dut_model(three, "n1", name="three_dut"), tmp_path, write_modelica=False)
     ref = td.simulate_pris(three, "n1", THREE, fs, periods)
     with cosim.FmuRunner(src, "ModelExchange") as s, cosim.FmuRunner(dut, "ModelExchange") as d:
-        w, err = cosimulate_exact(s, d, fs, ref["time_s"].size)
+        w, err = cosimulate_exact(s, d, fs, ref["time_s"].size, probes=["v_n2", "v_n3"])
     np.testing.assert_array_equal(w["v_bprbs"], ref["v_bprbs"])
-    for name in ("v_in", "i_in"):
+    for name in ("v_in", "i_in", "v_n2", "v_n3"):
         assert cosim.relative_rms(w[name], ref[name]) < 1e-9, name
     assert err < 1e-10
 
@@ -51,7 +51,8 @@ def _run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
 
 def test_simulate_engine_cosim_reports_the_coupling_error(tmp_path, capsys):
     argv = ["simulate", "--model", "three-section", "--vdc", "100", "--prbs-order", "5", "--fclk", "100e3",
-            "--rpris", "150", "--lpris", "4m", "--cpris", "1u", "--fs", "5e6", "--periods", "1", "--json"]
+            "--rpris", "150", "--lpris", "4m", "--cpris", "1u", "--fs", "5e6", "--periods", "1", "--probe", "n3",
+            "--json"]
     waves = {}
     for engine in ("numpy", "cosim"):
         code, stdout, _ = _run_cli(argv + ["--engine", engine, "--out", str(tmp_path / f"{engine}.csv")], capsys)
@@ -60,6 +61,7 @@ def test_simulate_engine_cosim_reports_the_coupling_error(tmp_path, capsys):
         waves[engine] = read_waveform_csv(tmp_path / f"{engine}.csv")
     assert info["engine"] == "cosim" and 0 <= info["coupling_error"] < 1e-10
     assert cosim.relative_rms(waves["cosim"].v_in, waves["numpy"].v_in) < 1e-9
+    assert cosim.relative_rms(waves["cosim"].v_out, waves["numpy"].v_out) < 1e-9  # the probe v(n3)
 
 
 # ---------------------------------------------------------------------- a winding FMU written by hand
