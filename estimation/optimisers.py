@@ -1431,6 +1431,11 @@ def _cma_body(ev: _Evaluator, rng: np.random.Generator, x0: np.ndarray | None, o
             es = cma.CMAEvolutionStrategy(np.clip(start, 0.0, 1.0).tolist(), o.sigma0, opts)
             while not es.stop():
                 X = np.clip(np.asarray(es.ask(), float), 0.0, 1.0)
+                left = ev.remaining_evals()
+                if left is not None and left < len(X):  # the budget ends inside this generation
+                    if left > 0:
+                        ev(X[:left])
+                    return "cma_es: max_evals reached"
                 F = ev(X)
                 finite = np.isfinite(F)
                 worst = float(F[finite].max()) if finite.any() else 1e300

@@ -317,6 +317,11 @@ def case_key(approach: str, optimiser: str, metric: str, snr_db: float | None = 
     return base if snr_db is None else f"{base}@{snr_db:g}dB"
 
 
+def fisher_task(approach: str) -> dict[str, Any]:
+    """The Fisher information of one approach's data at the target (a study task of its own)."""
+    return {"approach": approach, "fisher": _fisher(approach)}
+
+
 def _fisher(approach: str) -> dict[str, Any]:
     """Fisher information of the data an approach compares, at the target, for noise at FISHER_SNR_DB."""
     params = make_params()
@@ -397,6 +402,9 @@ def tasks(quick: bool = True, seed: int = 1, approaches: Sequence[str] | None = 
     if search:
         out += [Task(f"three-section-searchspace-v2-{a}-{mode}", search_space, {"approach": a, "quick": quick},
                      label=f"three-section search space {a}") for a in chosen]
+    else:
+        out += [Task(f"three-section-fisher-{a}", fisher_task, {"approach": a}, label=f"three-section Fisher {a}")
+                for a in chosen]
     return out
 
 
@@ -451,7 +459,7 @@ def run(quick: bool = True, out: str | None = None, scheduler: str | None = None
     runs = [r for r in results if "errors_percent" in r]
     spaces = [r for r in results if "relative_change" in r]
     rows = cells.aggregate(runs, lambda r: r["case"])
-    _attach_sensitivity(rows, spaces)
+    _attach_sensitivity(rows, [r for r in results if "fisher" in r])
     figures: list[str] = []
     if out is not None:
         from . import study_figures
