@@ -235,10 +235,10 @@ def optimiser_settings(approach: str, optimiser: str, quick: bool) -> dict[str, 
     pop, iters = (200, 100) if quick else (600, 200)
     polish, polish_time = (60, 60.0) if quick else (150, 600.0)
     if approach == "frequency":
-        pop, iters = (40, 25) if quick else (100, 60)
-        polish, polish_time = (12, 90.0) if quick else (40, 900.0)
+        pop, iters = (30, 20) if quick else (100, 60)
+        polish, polish_time = (10, 60.0) if quick else (40, 900.0)
     if approach == "emd":
-        pop, iters = (24, 20) if quick else (100, 40)
+        pop, iters = (12, 10) if quick else (100, 40)
         polish = 0
     glob: dict[str, Any]
     if optimiser == "ga":
