@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import sys
 import time
 from pathlib import Path
@@ -99,6 +100,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--full", action="store_true")
     p.add_argument("--workers", type=int)
     p.add_argument("--out", default="bench-cost-functions")
+    p.add_argument("--merge", nargs="*", default=[], metavar="DIR",
+                   help="also tabulate the rows of earlier runs (their study.json), e.g. other approaches")
     args = p.parse_args(argv)
     levels = [float(x) for x in args.snr_db.split(",") if x.strip()]
     t0 = time.perf_counter()
@@ -107,7 +110,12 @@ def main(argv: list[str] | None = None) -> int:
                         approaches=[a for a in args.approaches.split(",") if a],
                         metrics=[m for m in args.metrics.split(",") if m], search=False, progress=True)
     wall = time.perf_counter() - t0
-    rows = summary["rows"]
+    rows = list(summary["rows"])
+    for d in args.merge:
+        rows += json.loads((Path(d) / "study.json").read_text(encoding="utf-8"))["rows"]
+    order = {a: i for i, a in enumerate(three.APPROACHES)}
+    rows.sort(key=lambda r: (r.get("snr_db") is not None, -(r.get("snr_db") or 0), order[r["approach"]],
+                             r["optimiser"], r["cost_function"]))
     out = Path(args.out)
     lines = csv_rows(rows)
     with open(out / "cost_functions.csv", "w", newline="", encoding="utf-8") as fh:
