@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from estimation.optimisers import Budget
-from estimation.studies import cells
+from estimation.studies import cells, modal
 from estimation.studies import three_section as three
 
 
@@ -85,7 +85,9 @@ def test_tiny_study_with_seeds_and_noise_writes_rows_and_figures(tmp_path, monke
         glob = {"swarm_size": 8, "max_iter": 2} if optimiser == "pso" else {"restarts": 0, "popsize": 8, "max_iter": 2}
         return {"method": f"{three.GLOBAL_METHODS[optimiser]}+local",
                 "options": {"global_options": glob, "local_options": {"max_iter": 1}, "global_share": 0.9},
-                "budget": Budget(max_evals=60), "polish_iterations": 1, "polish_time_s": 10.0}
+                "budget": Budget(max_evals=60), "polish_iterations": 1, "polish_time_s": 10.0,
+                "modal": {"restarts": 1, "budget": Budget(max_evals=60), "own_local_evals": 20,
+                          "options": {"global_options": glob, "local_options": {"max_iter": 1}, "global_share": 0.9}}}
 
     monkeypatch.setattr(three, "optimiser_settings", tiny)
     out = tmp_path / "s"
@@ -113,3 +115,30 @@ def test_study_options_reject_bad_input_with_one_line(args, word, tmp_path):
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and word in lines[0]
     assert not (tmp_path / "x").exists()
+
+
+def test_matrix_pencil_recovers_damped_sinusoids():
+    fs = 11e6
+    k = np.arange(700)
+    modes = [(107e3, 0.0075, 3.0), (723e3, 4e-4, 0.5), (886e3, 3e-4, 0.4)]
+    y = 0.2 * np.exp(-2e4 * k / fs)
+    for f, z, a in modes:
+        w = 2 * np.pi * f
+        y = y + a * np.exp(-z * w * k / fs) * np.cos(w * np.sqrt(1 - z * z) * k / fs + 0.3)
+    poles, amp = modal.matrix_pencil(y, 12, fs)
+    f_est, z_est = modal.oscillatory(poles, amp, 3)
+    for (f, z, _), fe, ze in zip(modes, f_est, z_est):
+        assert fe == pytest.approx(f * np.sqrt(1 - z * z), rel=1e-7)
+        assert ze == pytest.approx(z, rel=1e-4)
+    assert modal.free_segment(np.array([1, 1, 1, -1, -1, -1, -1, -1, 1]), skip=1) == (4, 8)
+
+
+def test_modal_guide_is_zero_at_the_target_and_not_elsewhere():
+    """Modes read off the pris_cosim.timedomain target against the eigenvalues of the estimate's arrangement."""
+    params = three.make_params()
+    guide = three.modal_guide(params)
+    assert guide.f_t.size == 3
+    u = params.to_unit(three.TARGET)
+    off = params.to_unit({**three.TARGET, "k12": 0.99 * three.TARGET["k12"]})
+    c = guide.cost_batch(np.array([u, off]))
+    assert c[0] < 1e-12 and c[1] > 1e-6
