@@ -278,9 +278,9 @@ def optimiser_settings(approach: str, optimiser: str, quick: bool) -> dict[str, 
     return {"method": f"{GLOBAL_METHODS[optimiser]}+local",
             "options": {"global_options": glob, "local_options": local, "global_share": 0.9},
             "budget": Budget(max_evals=evals), "polish_iterations": polish, "polish_time_s": polish_time,
-            "modal": {"restarts": 3 if quick else 8, "budget": Budget(max_evals=8000),
+            "modal": {"restarts": (2 if approach == "emd" else 3) if quick else 8, "budget": Budget(max_evals=8000),
                       "options": {"global_options": mglob, "local_options": {"max_iter": 50}, "global_share": 0.9},
-                      "own_local_evals": (150 if approach == "emd" else 2000) if quick else
+                      "own_local_evals": (60 if approach == "emd" else 2000) if quick else
                                          (1000 if approach == "emd" else 10000)}}
 
 
