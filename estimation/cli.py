@@ -95,7 +95,9 @@ def emit(obj: Any) -> None:
 # ====================================================================== study
 def run_study_command(name: str, quick: bool = False, out: str | None = None, scheduler: str | None = None,
                       workers: int | None = None, seed: int = 1, progress: bool = True,
-                      measured: str | None = None, cases: str | None = None, diagnose: bool = False) -> dict[str, Any]:
+                      measured: str | None = None, cases: str | None = None, diagnose: bool = False,
+                      seeds: int | None = None, snr_db: str | None = None, optimisers: str | None = None
+                      ) -> dict[str, Any]:
     """Run a study by name; the dictionary that ``--json`` prints.
 
     ``measured`` (a responses CSV) and ``cases`` (comma-separated, e.g. ``"1,3"``) apply to
@@ -109,6 +111,8 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
         raise EstimationInputError(f"--scheduler must be 'processes', 'serial' or an address tcp://host:port (got {scheduler!r})")
     if (measured or cases or diagnose) and name != "hv-transformer":
         raise EstimationInputError("--measured, --cases and --diagnose apply to the hv-transformer study only")
+    if (seeds is not None or snr_db or optimisers) and name != "three-section":
+        raise EstimationInputError("--seeds, --snr-db and --optimisers apply to the three-section study only")
     out = out or f"study-{name}{'-quick' if quick else ''}"
     if name == "hv-transformer":
         from .studies import hv_transformer
@@ -125,16 +129,44 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
         from .studies import real_data
 
         return real_data.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed, progress=progress)
-    if name == "two-section":
-        from .studies import two_section as mod
-    else:
-        from .studies import three_section as mod  # type: ignore[no-redef]
+    if name == "three-section":
+        from .studies import three_section
+
+        levels, chosen_opts = _study_lists(snr_db, optimisers, three_section.OPTIMISERS)
+        if seeds is not None and seeds < 1:
+            raise EstimationInputError(f"--seeds must be at least 1 (got {seeds})")
+        return three_section.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed,
+                                 progress=progress, seeds=seeds or 1, snr_db=levels, optimisers=chosen_opts)
+    from .studies import two_section as mod
+
     return mod.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed, progress=progress)
+
+
+def _study_lists(snr_db: str | None, optimisers: str | None, known: list[str]
+                 ) -> tuple[list[float], list[str] | None]:
+    """``--snr-db 60,40,20`` and ``--optimisers pso,cma`` as lists (one-line errors)."""
+    levels: list[float] = []
+    for item in (snr_db or "").split(","):
+        if not item.strip():
+            continue
+        try:
+            v = float(item)
+        except ValueError:
+            raise EstimationInputError(f"--snr-db: {item.strip()!r} is not a number (dB)") from None
+        if not np.isfinite(v):
+            raise EstimationInputError(f"--snr-db: {item.strip()!r} is not a finite number (dB)")
+        levels.append(v)
+    chosen = [o.strip() for o in optimisers.split(",") if o.strip()] if optimisers else None
+    for o in chosen or ():
+        if o not in known:
+            raise EstimationInputError(f"--optimisers: unknown optimiser {o!r} (choose from {', '.join(known)})")
+    return levels, chosen
 
 
 def cmd_study(args: argparse.Namespace) -> int:
     summary = run_study_command(args.name, args.quick, args.out, args.scheduler, args.workers, args.seed,
-                                measured=args.measured, cases=args.cases, diagnose=args.diagnose)
+                                measured=args.measured, cases=args.cases, diagnose=args.diagnose,
+                                seeds=args.seeds, snr_db=args.snr_db, optimisers=args.optimisers)
     if args.json:
         emit(summary)
     else:
@@ -337,6 +369,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--seed", type=int, default=1, help="optimiser seed (default 1; hv-transformer: the virtual lab's noise seed)")
     p.add_argument("--measured", metavar="FILE.csv", help="hv-transformer: fit these six measured responses "
                    "(interfaces CSV) instead of the virtual lab's")
+    p.add_argument("--seeds", type=int, metavar="N", help="three-section: repeat every cell over N seeds "
+                   "(rows add success_rate, errors_percent_median, evaluations, evals_per_s)")
+    p.add_argument("--snr-db", metavar="LIST", help="three-section: also run with measurement noise on the target "
+                   "waveforms at these SNRs, e.g. 60,40,20")
+    p.add_argument("--optimisers", metavar="LIST", help="three-section: comma-separated subset of ga,pso,cma")
     p.add_argument("--cases", metavar="LIST", help="hv-transformer: comma-separated subset of 1,2a,2b,3")
     p.add_argument("--diagnose", action="store_true", help="hv-transformer: also diagnose what the best "
                    "estimate still gets wrong (frequency-dependent elements, a missing section ...)")

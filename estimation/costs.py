@@ -754,9 +754,12 @@ def iemd_nrmse(target_set: ArrayLike, estimate: ArrayLike) -> np.ndarray:
         Leading shape of ``estimate``.
     """
     g = _as_set(target_set, "target set")
-    inferred = inferred_imfs(g, estimate)
-    per = np.sqrt(np.mean((g - inferred) ** 2, axis=-1))
-    return _finite_or_inf(np.sum(per / imf_ranges(g), axis=-1))
+    v = np.asarray(estimate, float)
+    if v.ndim == 0 or v.shape[-1] != g.shape[1]:
+        raise ValueError(f"estimate must end in {g.shape[1]} samples (got shape {v.shape})")
+    # gamma_r - v~^i_r = sum_k gamma_k - v~ for every r: one RMS instead of N_r (same value)
+    per = np.sqrt(np.mean((g.sum(axis=0) - v) ** 2, axis=-1))
+    return _finite_or_inf(per * np.sum(1.0 / imf_ranges(g)))
 
 
 def iemd_correlation(target_set: ArrayLike, estimate: ArrayLike) -> np.ndarray:
@@ -771,7 +774,21 @@ def iemd_correlation(target_set: ArrayLike, estimate: ArrayLike) -> np.ndarray:
         In ``[0, 2 N_r]``, leading shape of ``estimate``.
     """
     g = _as_set(target_set, "target set")
-    return np.sum(correlation_cost(g, inferred_imfs(g, estimate)), axis=-1)
+    v = np.asarray(estimate, float)
+    if v.ndim == 0 or v.shape[-1] != g.shape[1]:
+        raise ValueError(f"estimate must end in {g.shape[1]} samples (got shape {v.shape})")
+    # v~^i_r = gamma_r + d with d = v~ - sum_k gamma_k: the correlations from (co)variances, no (N_r, N) copies
+    gc = g - g.mean(axis=-1, keepdims=True)
+    d = v - g.sum(axis=0)
+    dc = d - d.mean(axis=-1, keepdims=True)
+    n = g.shape[1]
+    var_g = np.sum(gc ** 2, axis=-1) / n  # (N_r,)
+    cov_gd = np.einsum("...k,rk->...r", dc, gc) / n  # (..., N_r)
+    var_d = np.sum(dc ** 2, axis=-1)[..., None] / n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = (var_g + cov_gd) / np.sqrt(var_g * np.maximum(var_g + 2 * cov_gd + var_d, 0.0))
+    rho = np.where(np.isfinite(rho), np.clip(rho, -1.0, 1.0), 0.0)
+    return np.sum(1.0 - rho, axis=-1)
 
 
 # ====================================================================== cost objects

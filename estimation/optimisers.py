@@ -20,7 +20,8 @@ Public API
 - :class:`Budget`, :class:`OptimResult`, :class:`Progress`
 - :func:`local` (``fmincon``), :func:`pattern_search` (``patternsearch``),
   :func:`multistart` (``GlobalSearch``), :func:`genetic` (``ga``),
-  :func:`particle_swarm` (``particleswarm``), :func:`hybrid` (global then
+  :func:`particle_swarm` (``particleswarm``), :func:`cma_es` (CMA-ES, the
+  ``cma`` package), :func:`hybrid` (global then
   local), and the dispatcher :func:`minimize`.
 - Option containers :class:`LocalOptions`, :class:`PatternSearchOptions`,
   :class:`MultistartOptions`, :class:`GeneticOptions`,
@@ -53,6 +54,7 @@ __all__ = [
     "MultistartOptions",
     "GeneticOptions",
     "ParticleSwarmOptions",
+    "CMAESOptions",
     "METHODS",
     "ALIASES",
     "local",
@@ -60,6 +62,7 @@ __all__ = [
     "multistart",
     "genetic",
     "particle_swarm",
+    "cma_es",
     "hybrid",
     "minimize",
 ]
@@ -1378,6 +1381,108 @@ def particle_swarm(
     return _drive("particle_swarm", fun, n, seed, budget, x0, callback, lambda ev, rng, x: _pso_body(ev, rng, x, o))
 
 
+@dataclass(frozen=True)
+class CMAESOptions:
+    """Options of :func:`cma_es` (covariance matrix adaptation, the ``cma`` package).
+
+    Attributes
+    ----------
+    popsize : int, optional
+        Offspring per generation; default ``4 + floor(3 ln n)`` (``cma``'s).
+    sigma0 : float
+        Initial step size in the unit cube (0.3).
+    restarts : int
+        Restarts after a stop, each with twice the population (IPOP; 4).
+    max_iter : int, optional
+        Generations per run; default ``cma``'s.
+    tol_fun : float
+        Stop a run when the best costs of recent generations differ by less (1e-12).
+    """
+
+    popsize: int | None = None
+    sigma0: float = 0.3
+    restarts: int = 4
+    max_iter: int | None = None
+    tol_fun: float = 1e-12
+
+    def __post_init__(self) -> None:
+        m = "cma_es"
+        _need_int(m, "popsize", self.popsize, 2, optional=True)
+        _need_real(m, "sigma0", self.sigma0, 1e-9, 1.0)
+        _need_int(m, "restarts", self.restarts, 0)
+        _need_int(m, "max_iter", self.max_iter, 1, optional=True)
+        _need_real(m, "tol_fun", self.tol_fun, 0.0)
+
+
+def _cma_body(ev: _Evaluator, rng: np.random.Generator, x0: np.ndarray | None, o: CMAESOptions) -> str:
+    import cma
+
+    popsize = o.popsize if o.popsize is not None else 4 + int(3 * math.log(ev.n))
+    start = rng.random(ev.n) if x0 is None else x0
+    message = "cma_es: no run"
+    for k in range(o.restarts + 1):
+        opts: dict[str, Any] = {"bounds": [0.0, 1.0], "popsize": popsize * 2 ** k, "verbose": -9,
+                                "seed": int(rng.integers(1, 2 ** 31 - 1)), "tolfun": o.tol_fun,
+                                "tolflatfitness": 10}
+        if o.max_iter is not None:
+            opts["maxiter"] = o.max_iter
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            es = cma.CMAEvolutionStrategy(np.clip(start, 0.0, 1.0).tolist(), o.sigma0, opts)
+            while not es.stop():
+                X = np.clip(np.asarray(es.ask(), float), 0.0, 1.0)
+                left = ev.remaining_evals()
+                if left is not None and left < len(X):  # the budget ends inside this generation
+                    if left > 0:
+                        ev(X[:left])
+                    return "cma_es: max_evals reached"
+                F = ev(X)
+                finite = np.isfinite(F)
+                worst = float(F[finite].max()) if finite.any() else 1e300
+                es.tell(list(X), np.where(finite, F, 10.0 * abs(worst) + 1.0).tolist())
+                ev.end_iteration()
+        message = f"cma_es: run {k + 1} stopped ({', '.join(sorted(es.stop()))})"
+        start = rng.random(ev.n)
+    return message
+
+
+def cma_es(
+    fun: Objective,
+    n: int,
+    *,
+    x0: Any = None,
+    seed: int | None = None,
+    budget: Budget | None = None,
+    callback: Callable[[Progress], Any] | None = None,
+    **options: Any,
+) -> OptimResult:
+    """CMA-ES with IPOP restarts (Hansen's ``cma`` package), one batch per generation.
+
+    Parameters
+    ----------
+    fun : callable
+        Batched objective ``fun(U) -> f``.
+    n : int
+        Number of parameters.
+    x0 : array_like, optional
+        Mean of the first run (default: a random point of the cube).
+    seed : int, optional
+        Seed; every run's ``cma`` seed is drawn from it.
+    budget : Budget, optional
+        Evaluation/time/target limits.
+    callback : callable, optional
+        ``callback(Progress)`` after every generation; returning True stops.
+    **options
+        See :class:`CMAESOptions`.
+
+    Returns
+    -------
+    OptimResult
+    """
+    o = _parse_options(CMAESOptions, "cma_es", options)
+    return _drive("cma_es", fun, n, seed, budget, x0, callback, lambda ev, rng, x: _cma_body(ev, rng, x, o))
+
+
 # --------------------------------------------------------------------------- #
 # Hybrid and dispatcher
 # --------------------------------------------------------------------------- #
@@ -1389,6 +1494,7 @@ _GLOBAL_BODIES: dict[str, tuple[type, Callable[..., str]]] = {
     "multistart": (MultistartOptions, lambda ev, rng, x, o: _multistart_body(ev, rng, _centre_if_none(x, ev.n), o)),
     "genetic": (GeneticOptions, _genetic_body),
     "particle_swarm": (ParticleSwarmOptions, _pso_body),
+    "cma_es": (CMAESOptions, _cma_body),
 }
 
 
@@ -1457,7 +1563,7 @@ def hybrid(
 
 
 #: Canonical method names accepted by :func:`minimize`.
-METHODS: tuple[str, ...] = ("local", "pattern_search", "multistart", "genetic", "particle_swarm", "hybrid")
+METHODS: tuple[str, ...] = ("local", "pattern_search", "multistart", "genetic", "particle_swarm", "cma_es", "hybrid")
 
 #: MATLAB-style aliases.
 ALIASES: dict[str, str] = {
@@ -1467,6 +1573,8 @@ ALIASES: dict[str, str] = {
     "ga": "genetic",
     "pso": "particle_swarm",
     "particleswarm": "particle_swarm",
+    "cma": "cma_es",
+    "cmaes": "cma_es",
 }
 
 
@@ -1532,7 +1640,7 @@ def minimize(
     if name == "hybrid":
         return _call_hybrid(fun, n, options.pop("global_method", "particle_swarm"), options, common)
     single = {"local": local, "pattern_search": pattern_search, "multistart": multistart,
-              "genetic": genetic, "particle_swarm": particle_swarm}[name]
+              "genetic": genetic, "particle_swarm": particle_swarm, "cma_es": cma_es}[name]
     return single(fun, n, **common, **options)
 
 

@@ -404,3 +404,23 @@ def test_x0_is_used():
     assert res.fun == 0.0 and np.array_equal(res.x, c)
     res = opt.particle_swarm(sphere(c), 3, seed=0, x0=c, budget=Budget(max_evals=30))
     assert res.fun == 0.0
+
+
+# ------------------------------------------------------------------ CMA-ES
+def test_cma_es_finds_the_rosenbrock_minimum_in_batches_and_repeats_with_its_seed():
+    fun = Counting(rosenbrock)
+    r = opt.minimize(fun, 4, method="cma", seed=3, budget=Budget(max_evals=6000))
+    assert r.method == "cma_es" and r.fun < 1e-6
+    np.testing.assert_allclose(r.x, 0.75, atol=1e-3)  # x = 1 in [-2, 2]
+    assert r.nfev == fun.nfev <= 6000 and max(fun.batches) > 1  # one batch per generation
+    again = opt.minimize(rosenbrock, 4, method="cmaes", seed=3, budget=Budget(max_evals=6000))
+    np.testing.assert_array_equal(again.x, r.x)
+
+
+def test_cma_es_hybrid_and_bad_options():
+    r = opt.minimize(sphere([0.1, 0.9, 0.4]), 3, method="cma+local", seed=1, budget=Budget(max_evals=3000))
+    assert r.method == "cma_es+local" and r.fun < 1e-10
+    with pytest.raises(ValueError, match="sigma0"):
+        opt.cma_es(sphere([0.5]), 1, sigma0=0.0)
+    with pytest.raises(ValueError, match="restarts"):
+        opt.minimize(sphere([0.5]), 1, method="cma", options={"restarts": -1})

@@ -1,0 +1,194 @@
+"""Per-cell statistics of the estimation studies: measurement noise, convergence traces, seeds, Fisher information.
+
+A *cell* is one approach x optimiser x cost function (x noise level) of a
+study; a *run* is one cell with one seed. These helpers add what one run per
+cell cannot say:
+
+- :func:`add_noise` puts white Gaussian measurement noise at a given SNR on
+  target waveforms;
+- :func:`convergence_trace` turns the recorded costs of a run into the best
+  cost against the number of evaluations;
+- :func:`aggregate` folds the runs of a cell over seeds into one row
+  (success rate, median and range of the errors, evaluations, speed);
+- :func:`fisher_information` computes the Fisher information of the
+  parameters from the residual Jacobian (the Cramer-Rao bound on each
+  parameter's relative standard deviation at a stated noise level).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..parameters import ParameterSet
+
+#: A run succeeds when every parameter is within this many percent of the target.
+SUCCESS_PERCENT = 5.0
+
+
+def add_noise(waveforms: Mapping[str, np.ndarray], snr_db: float | None, seed: int,
+              names: Sequence[str] = ("v_in", "i_in")) -> dict[str, np.ndarray]:
+    """Copy of ``waveforms`` with white Gaussian noise on ``names`` at ``snr_db``.
+
+    Parameters
+    ----------
+    waveforms : mapping
+        Name to ``(K,)`` samples (V, A).
+    snr_db : float or None
+        Signal-to-noise ratio, dB: the noise standard deviation is the
+        waveform's RMS (about its mean) times ``10 ** (-snr_db / 20)``. None:
+        no noise (the waveforms are copied).
+    seed : int
+        Seed of the noise generator.
+    names : sequence of str
+        Waveforms that receive noise (others are copied unchanged).
+
+    Returns
+    -------
+    dict
+    """
+    out = {k: np.array(v, float, copy=True) for k, v in waveforms.items()}
+    if snr_db is None:
+        return out
+    rng = np.random.default_rng(seed)
+    for k in names:
+        if k in out:
+            x = out[k]
+            sigma = float(np.std(x)) * 10.0 ** (-float(snr_db) / 20.0)
+            out[k] = x + sigma * rng.standard_normal(x.shape)
+    return out
+
+
+def convergence_trace(costs: np.ndarray, extra: Sequence[tuple[int, float]] = (), points: int = 60
+                      ) -> list[list[float]]:
+    """Best cost so far against evaluations, thinned to about ``points`` log-spaced entries.
+
+    Parameters
+    ----------
+    costs : numpy.ndarray
+        ``(M,)`` costs in evaluation order.
+    extra : sequence of (evaluations, cost)
+        Later points (e.g. after a polish), appended in order.
+
+    Returns
+    -------
+    list of [evaluations, best cost]
+    """
+    c = np.asarray(costs, float)
+    trace: list[list[float]] = []
+    if c.size:
+        best = np.minimum.accumulate(np.where(np.isfinite(c), c, np.inf))
+        idx = np.unique(np.clip(np.round(np.geomspace(1, c.size, points)).astype(int) - 1, 0, c.size - 1))
+        trace = [[float(i + 1), float(best[i])] for i in idx if math.isfinite(best[i])]
+    last = trace[-1][1] if trace else math.inf
+    for n, f in extra:
+        last = min(last, float(f))
+        if math.isfinite(last):
+            trace.append([float(n), last])
+    return trace
+
+
+def success(errors: Mapping[str, float], limit: float = SUCCESS_PERCENT) -> bool:
+    """Every parameter within ``limit`` percent."""
+    return all(math.isfinite(e) and abs(e) <= limit for e in errors.values())
+
+
+def aggregate(runs: Sequence[Mapping[str, Any]], key: Callable[[Mapping[str, Any]], Any]) -> list[dict[str, Any]]:
+    """One row per cell from its runs over seeds.
+
+    Each row is the run with the lowest cost (its ``errors_percent``,
+    ``estimate``, ``cost``), plus ``seeds``, ``success_rate`` (fraction of
+    seeds with every parameter within :data:`SUCCESS_PERCENT`),
+    ``errors_percent_median`` and ``errors_percent_range`` ([min, max] of the
+    signed errors over seeds), ``abs_error_percent_max_median`` (median over
+    seeds of the worst parameter's error), ``evaluations`` (median per run),
+    ``evals_per_s`` (all evaluations over all wall time), ``wall_s`` (median)
+    and ``wall_s_total``.
+    """
+    cells: dict[Any, list[Mapping[str, Any]]] = {}
+    for r in runs:
+        cells.setdefault(key(r), []).append(r)
+    rows = []
+    for group in cells.values():
+        best = min(group, key=lambda r: r["cost"] if math.isfinite(r["cost"]) else math.inf)
+        names = list(best["errors_percent"])
+        E = np.array([[r["errors_percent"][k] for k in names] for r in group], float)
+        evals = np.array([r["evaluations"] for r in group], float)
+        walls = np.array([r["wall_s"] for r in group], float)
+        row = dict(best)
+        row.update({
+            "seeds": [r["settings"]["seed"] for r in group],
+            "success_rate": float(np.mean([success(r["errors_percent"]) for r in group])),
+            "errors_percent_median": dict(zip(names, np.median(E, axis=0).tolist())),
+            "errors_percent_range": {k: [float(E[:, i].min()), float(E[:, i].max())] for i, k in enumerate(names)},
+            "abs_error_percent_max_median": float(np.median(np.max(np.abs(E), axis=1))),
+            "evaluations": int(np.median(evals)),
+            "evals_per_s": float(evals.sum() / max(walls.sum(), 1e-9)),
+            "wall_s": float(np.median(walls)),
+            "wall_s_total": float(walls.sum()),
+            "cost_median": float(np.median([r["cost"] for r in group])),
+            "traces": [r.get("trace", []) for r in group],
+        })
+        row.pop("trace", None)
+        rows.append(row)
+    return rows
+
+
+def fisher_information(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
+                       values: Mapping[str, float], sigma: float, rel_step: float = 1e-4,
+                       limit_percent: float = SUCCESS_PERCENT) -> dict[str, Any]:
+    """Fisher information of the parameters (log scale) from the residual Jacobian at ``values``.
+
+    With white noise of standard deviation ``sigma`` on every residual,
+    ``F = J^T J / sigma^2`` where ``J[:, j] = d r / d ln(theta_j)`` (central
+    differences of relative size ``rel_step``); ``sqrt(diag(F^-1))`` bounds the
+    relative standard deviation of each parameter (Cramer-Rao).
+
+    Parameters
+    ----------
+    residuals : callable
+        ``residuals(U) -> (P, N)`` on unit-cube points.
+    params : ParameterSet
+    values : mapping
+        Physical values where the Jacobian is taken (the target).
+    sigma : float
+        Noise standard deviation, unit of the residuals.
+    limit_percent : float
+        Parameters whose bound exceeds this are reported as poorly determined.
+
+    Returns
+    -------
+    dict
+        ``relative_sd_percent`` {name: %}, ``relative_sensitivity`` {name:
+        column norm over the largest}, ``condition`` (of ``J``),
+        ``poorly_determined`` [names], ``sigma``.
+    """
+    names = list(params.varying)
+    pts = []
+    for k in names:
+        for s in (1 + rel_step, 1 - rel_step):
+            v = dict(values)
+            v[k] = values[k] * s
+            pts.append(params.to_unit({n: v[n] for n in names}))
+    R = np.asarray(residuals(np.array(pts)), float)
+    J = ((R[0::2] - R[1::2]) / (2 * rel_step)).T  # (N, n)
+    norms = np.linalg.norm(J, axis=0)
+    s = np.linalg.svd(J, compute_uv=False)
+    cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
+    F = J.T @ J / sigma ** 2
+    try:
+        cov = np.linalg.pinv(F, rcond=1e-15)
+        sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * 100.0
+    except np.linalg.LinAlgError:  # pragma: no cover - pinv of a finite matrix converges
+        sd = np.full(len(names), math.inf)
+    rel_sd = {k: float(x) for k, x in zip(names, sd)}
+    return {
+        "relative_sd_percent": rel_sd,
+        "relative_sensitivity": {k: float(x / max(norms.max(), 1e-300)) for k, x in zip(names, norms)},
+        "condition": cond,
+        "sigma": float(sigma),
+        "poorly_determined": [k for k in names if not rel_sd[k] <= limit_percent],
+    }
