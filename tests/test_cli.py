@@ -83,7 +83,7 @@ def test_models_listing():
     (["frf", "--model", "nope"], "unknown model 'nope'"),
     (["frf", "--model", "two-section", "--port", "zz"], "port 'zz' is not a node"),
     (["frf", "--model", "two-section", "--set", "R1=abc"], "--set R1: cannot parse value"),
-    (["frf", "--model", "two-section", "--set", "M12=40"], "coupling |k| must be below 1"),
+    (["frf", "--model", "two-section", "--set", "M12=40"], "outside the accepted range -1 < k < 1"),
     (["frf", "--model", "hv-4section", "--set", "Ka1b1=1.2"], "element 'Ka1b1'"),
     (["frf", "--model", "hv-4section", "--config", "XXOC"], "no configuration 'XXOC'"),
     (["frf", "--model", "three-section", "--fmin", "0"], "fmin"),
