@@ -51,6 +51,19 @@ def _finite(dest: str, value: float, low: float | None = None, high: float | Non
         raise OptionError(f"{flag} {value:g}{unit} is outside the accepted range {low:g} .. {high:g}{unit}")
 
 
+def _checked_path(check: Any) -> Any:
+    """Turn an OSError of a path check (name too long, permission) into a one-line OptionError."""
+    def wrapper(flag: str, value: str, *args: Any, **kwargs: Any) -> None:
+        try:
+            if value and any(len(part.encode("utf-8", "surrogateescape")) > 255 for part in Path(value).parts):
+                raise OptionError(f"{flag}: a name in {value[:60]!r}... is longer than 255 bytes")
+            check(flag, value, *args, **kwargs)
+        except OSError as exc:
+            raise OptionError(f"{flag}: {exc.strerror or exc}: {value[:200]}") from None
+    return wrapper
+
+
+@_checked_path
 def _input_file(flag: str, value: str) -> None:
     if not value:
         raise OptionError(f"{flag}: empty file name")
@@ -70,6 +83,7 @@ def _existing_ancestor(p: Path) -> Path:
     return q
 
 
+@_checked_path
 def _output_file(flag: str, value: str, parent_must_exist: bool = False) -> None:
     if not value or not value.strip():
         raise OptionError(f"{flag}: empty file name")
@@ -88,6 +102,7 @@ def _output_file(flag: str, value: str, parent_must_exist: bool = False) -> None
         raise OptionError(f"{flag}: directory {base} is not writable")
 
 
+@_checked_path
 def _output_dir(flag: str, value: str) -> None:
     if not value or not value.strip():
         raise OptionError(f"{flag}: empty directory name")

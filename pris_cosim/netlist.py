@@ -77,18 +77,18 @@ def _tokens(line: str, number: int, source: str) -> list[Token]:
 def _logical_lines(text: str, source: str) -> list[tuple[int, str, list[Token]]]:
     """Join ``+`` continuation lines; strip ``;`` comments.
 
-    Returns (line number, stripped text, tokens) per logical line; comment lines (``*``) keep their text
-    and have no tokens.
+    Returns (line number, stripped text, tokens) per logical line; comment lines (``*``) keep their text and
+    have one token, their ``*``.
     """
     out: list[tuple[int, str, list[Token]]] = []
     for number, raw in enumerate(text.splitlines(), start=1):
         stripped = raw.strip()
         if stripped.startswith("*"):
-            out.append((number, stripped, []))
+            out.append((number, stripped, [("*", number, raw.index("*") + 1)]))
             continue
         line = raw.split(";", 1)[0].rstrip()
         stripped = line.lstrip()
-        if stripped.startswith("+") and out and out[-1][2]:
+        if stripped.startswith("+") and out and out[-1][2] and not out[-1][1].startswith("*"):
             plus = line.index("+")
             tokens = _tokens(line[:plus] + " " + line[plus + 1:], number, source)
             prev = out[-1]
@@ -146,7 +146,7 @@ def parse_netlist(text: str, source: str = "<netlist>") -> Circuit:
         if line.startswith("*"):
             body = line[1:].strip()
             if body.startswith("@"):
-                _directive(circuit, units, body[1:].split(), where)
+                _directive(circuit, units, body[1:].split(), f"{where}:{tokens[0][2]}")
             elif index == 0 and not circuit.title:
                 circuit.title = body
             else:
