@@ -287,7 +287,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             check_options(args)
             return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:
-        text = _one_line(exc) if isinstance(exc, Interrupted) and str(exc) else "interrupted"
+        text = _one_line(exc) if str(exc) else "interrupted"
         print(f"{prefix}: {text}", file=sys.stderr, flush=True)
         return 130
     except RuntimeWarning as exc:
