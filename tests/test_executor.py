@@ -65,8 +65,10 @@ def executions(marker_dir: Path) -> dict[int, int]:
     return counts
 
 
-def counted_tasks(marker_dir: Path, count: int) -> list[Task]:
-    return [Task(f"t{x}", counted, {"x": x, "marker_dir": str(marker_dir)}, label=f"case {x}") for x in range(count)]
+def counted_tasks(marker_dir: Path, count: int, delay: float = 0.0) -> list[Task]:
+    extra = {"delay": delay} if delay else {}
+    return [Task(f"t{x}", counted, {"x": x, "marker_dir": str(marker_dir), **extra}, label=f"case {x}")
+            for x in range(count)]
 
 
 def optimise_tasks() -> list[Task]:
@@ -439,14 +441,33 @@ def _group_gone(pgid: int, timeout: float) -> bool:
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    """The uninterrupted study on two workers."""
-    code, out, err = _finish(_start(tmp_path_factory.mktemp("ref") / "out", 2))
-    assert code == 0, err
-    return _stable(json.loads(out)["rows"])
+def killed_then_resumed(tmp_path_factory):
+    """The study on two workers, its main process killed by SIGKILL after the first stored run, then resumed.
+
+    Returns what the test of the kill checks and the resumed answer (the reference of the other tests).
+    """
+    out = tmp_path_factory.mktemp("killed") / "out"
+    proc = _start(out, 2)
+    _wait_for_runs(out, 1, proc)
+    t0 = time.monotonic()
+    proc.kill()  # the main process only, as the OOM killer or a batch scheduler does
+    proc.communicate(timeout=5)  # EOF on stdout and stderr: nothing else holds the pipes
+    pipes_s = time.monotonic() - t0
+    gone = _group_gone(proc.pid, 5 - pipes_s)
+    stored = ResultsStore(out).ids()  # complete files that pass their checksums
+    code, stdout, stderr = _finish(_start(out, 2))
+    assert code == 0, stderr
+    return {"pipes_s": pipes_s, "gone": gone, "stored": stored, "resume_err": stderr,
+            "rows": _stable(json.loads(stdout)["rows"])}
 
 
-def test_ctrl_c_to_the_group_stops_with_one_line_and_resume_gives_the_same_answer(tmp_path, reference):
+def test_sigkill_of_the_main_process_ends_its_workers_and_frees_the_pipes(killed_then_resumed):
+    assert killed_then_resumed["pipes_s"] < 5 and killed_then_resumed["gone"], "workers outlived the main process"
+    assert len(killed_then_resumed["stored"]) >= 1
+    assert f"{len(killed_then_resumed['stored'])} already stored" in killed_then_resumed["resume_err"]
+
+
+def test_ctrl_c_to_the_group_stops_with_one_line_and_resume_gives_the_same_answer(tmp_path, killed_then_resumed):
     out = tmp_path / "out"
     proc = _start(out, 1)
     _wait_for_runs(out, 1, proc)
@@ -462,30 +483,28 @@ def test_ctrl_c_to_the_group_stops_with_one_line_and_resume_gives_the_same_answe
     assert code == 0, stderr
     assert "1 already stored, 1 to run" in stderr
     assert (out / "runs" / "two-section-case4-quick-seed1.json").read_text() == stored  # not run again
-    _assert_same(_stable(json.loads(stdout)["rows"]), reference)  # same numbers on 1 and 2 workers
+    # the same numbers on one worker as on two, resumed at different points
+    _assert_same(_stable(json.loads(stdout)["rows"]), killed_then_resumed["rows"])
 
 
-def test_sigkill_of_the_main_process_ends_its_workers_and_frees_the_pipes(tmp_path, reference):
-    out = tmp_path / "out"
-    proc = _start(out, 1)
-    _wait_for_runs(out, 1, proc)
-    t0 = time.monotonic()
-    proc.kill()  # the main process only, as the OOM killer or a batch scheduler does
-    proc.communicate(timeout=5)  # EOF on stdout and stderr: nothing else holds the pipes
-    assert _group_gone(proc.pid, 5 - (time.monotonic() - t0)), "workers outlived the main process by 5 s"
-    code, stdout, stderr = _finish(_start(out, 2))
-    assert code == 0, stderr
-    _assert_same(_stable(json.loads(stdout)["rows"]), reference)
+_SHARE = """
+import json, sys
+from estimation.executor import run_tasks
+from test_executor import counted_tasks
+from pathlib import Path
+results = run_tasks(counted_tasks(Path(sys.argv[1]), 6, delay=0.3), executor="serial", store=sys.argv[2])
+print(json.dumps(results))
+"""
 
 
-def test_two_runs_on_one_directory_share_the_tasks(tmp_path, reference):
-    out = tmp_path / "out"
-    first, second = _start(out, 1), _start(out, 1)
-    results = [_finish(first), _finish(second)]
-    for code, stdout, stderr in results:
-        assert code == 0, stderr
-        _assert_same(_stable(json.loads(stdout)["rows"]), reference)
-    errs = results[0][2] + results[1][2]
-    assert errs.count("done in") == 2 and errs.count("stored by another run") == 2, errs
-    records = ResultsStore(out).records()
-    assert len({r["pid"] for r in records}) == 2  # one task computed by each run
+def test_two_runs_on_one_directory_share_the_tasks(markers, tmp_path):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), *sys.path])}
+    procs = [subprocess.Popen([sys.executable, "-c", _SHARE, str(markers), str(tmp_path / "s")], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    outputs = [p.communicate(timeout=60) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], outputs
+    first, second = (json.loads(out) for out, _ in outputs)
+    assert first == second and [r["y"] for r in first] == [x * x for x in range(6)]
+    assert executions(markers) == {x: 1 for x in range(6)}  # every task computed once in all
+    errs = outputs[0][1] + outputs[1][1]
+    assert errs.count("done in") == 6 and errs.count("stored by another run") == 6, errs
