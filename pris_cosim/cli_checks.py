@@ -173,6 +173,8 @@ def check_options(args: argparse.Namespace) -> None:
         raise OptionError(f"--fmin ({v['fmin']:g} Hz) must be below --fmax ({v['fmax']:g} Hz)")
     if given("points") and v["points"] < 1:
         raise OptionError(f"--points must be at least 1 (got {v['points']})")
+    if command == "diagnose" and given("port") and not given("netlist"):
+        raise OptionError("--port applies to a --netlist baseline only")
     _source_checks(v, given)
     if given("name") and command == "build-fmu" and not str(v["name"]).strip():
         raise OptionError("--name: empty name")

@@ -998,7 +998,8 @@ def _read_segmented(
         data = _parse_rows(path, rows, cells)
         _check_count(path, data.shape[0], last_line)
         lines_no = [r[0] for r in rows]
-        f = data[:, 0] * fscale
+        with np.errstate(over="ignore"):  # an overflow to inf is refused by the range check
+            f = data[:, 0] * fscale
         _check_rows_frequency(path, f, lines_no, 1, cells[0])
         if form == "magphase":
             _check_nonnegative(path, data[:, 1], lines_no, 2, cells[1])
@@ -1483,7 +1484,8 @@ def read_e4990a(
     data = _parse_rows(path, rows, cells)
     _check_count(path, data.shape[0], end_line or hline)
     line_no = [r[0] for r in rows]
-    f = data[:, 0] * fscale
+    with np.errstate(over="ignore"):  # an overflow to inf is refused by the range check
+        f = data[:, 0] * fscale
     _check_rows_frequency(path, f, line_no, 1, cells[0])
     if form == "magphase":
         _check_nonnegative(path, data[:, 1], line_no, 2, cells[1])

@@ -423,7 +423,26 @@ def read_netlist(path: str | os.PathLike[str]) -> Circuit:
     circuit = parse_netlist(text, str(p))
     if not circuit.elements:
         raise NetlistError(f"{p}: no circuit elements found")
+    try:
+        circuit.check_topology()
+    except CircuitError as exc:
+        raise NetlistError(f"{p}{_locate(text, str(exc))}: {exc}") from None
     return circuit
+
+
+def _locate(text: str, message: str) -> str:
+    """``:line:column`` of the element a topology message names (or of the first element on the node it names)."""
+    m = re.search(r"element '([^']+)'|node '([^']+)'", message)
+    if not m:
+        return ""
+    element, node = m.group(1), m.group(2)
+    for number, raw in enumerate(text.splitlines(), start=1):
+        words = raw.split(";", 1)[0].split()
+        if not words or raw.lstrip().startswith(("*", ".", "+")):
+            continue
+        if element and words[0].lower() == element.lower() or node and node in (w.lower() for w in words[1:3]):
+            return f":{number}:{raw.index(words[0]) + 1}"
+    return ""
 
 
 def format_netlist(circuit: Circuit) -> str:
