@@ -109,10 +109,14 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
         raise EstimationInputError(f"--workers must be at least 1 (got {workers})")
     if scheduler is not None and scheduler not in ("processes", "serial") and "://" not in scheduler:
         raise EstimationInputError(f"--scheduler must be 'processes', 'serial' or an address tcp://host:port (got {scheduler!r})")
-    if (measured or cases or diagnose) and name != "hv-transformer":
-        raise EstimationInputError("--measured, --cases and --diagnose apply to the hv-transformer study only")
+    if (measured or diagnose) and name != "hv-transformer":
+        raise EstimationInputError("--measured and --diagnose apply to the hv-transformer study only")
+    if cases and name not in ("hv-transformer", "two-section"):
+        raise EstimationInputError("--cases applies to the hv-transformer and two-section studies only")
     if (seeds is not None or snr_db or optimisers) and name != "three-section":
         raise EstimationInputError("--seeds, --snr-db and --optimisers apply to the three-section study only")
+    if seed is not None and not (isinstance(seed, int) and 0 <= seed < 2**32):
+        raise EstimationInputError(f"--seed must be an integer from 0 to {2**32 - 1} (got {seed})")
     out = out or f"study-{name}{'-quick' if quick else ''}"
     if name == "hv-transformer":
         from .studies import hv_transformer
@@ -137,9 +141,16 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
             raise EstimationInputError(f"--seeds must be at least 1 (got {seeds})")
         return three_section.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed,
                                  progress=progress, seeds=seeds or 1, snr_db=levels, optimisers=chosen_opts)
-    from .studies import two_section as mod
+    if name == "two-section":
+        from .studies import two_section
 
-    return mod.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed, progress=progress)
+        chosen = [c.strip() for c in cases.split(",") if c.strip()] if cases else None
+        for c in chosen or ():
+            if c not in two_section.CASES:
+                raise EstimationInputError(f"--cases: unknown case {c!r} (cases: {', '.join(two_section.CASES)})")
+        return two_section.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed,
+                               progress=progress, cases=chosen)
+    raise EstimationInputError(f"unknown study {name!r}")
 
 
 def _study_lists(snr_db: str | None, optimisers: str | None, known: list[str]
@@ -163,14 +174,26 @@ def _study_lists(snr_db: str | None, optimisers: str | None, known: list[str]
     return levels, chosen
 
 
+def _same_terminal() -> bool:
+    """True when stdout and stderr are one terminal (a table in the progress is already on screen)."""
+    import os
+
+    try:
+        return os.isatty(1) and os.isatty(2) and os.path.samestat(os.fstat(1), os.fstat(2))
+    except OSError:
+        return False
+
+
 def cmd_study(args: argparse.Namespace) -> int:
+    progress = not getattr(args, "quiet", False)
     summary = run_study_command(args.name, args.quick, args.out, args.scheduler, args.workers, args.seed,
-                                measured=args.measured, cases=args.cases, diagnose=args.diagnose,
+                                progress=progress, measured=args.measured, cases=args.cases, diagnose=args.diagnose,
                                 seeds=args.seeds, snr_db=args.snr_db, optimisers=args.optimisers)
     if args.json:
         emit(summary)
     else:
-        print(summary["table"])
+        if not (progress and _same_terminal()):  # the progress on stderr ends with the same table
+            print(summary["table"])
         if summary.get("checks"):
             print("checks: " + ", ".join(f"{k}={'ok' if v else 'FAILED'}" for k, v in summary["checks"].items()))
         print(f"results in {summary['out']} ({summary['wall_s']:.1f} s)")
@@ -374,7 +397,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--snr-db", metavar="LIST", help="three-section: also run with measurement noise on the target "
                    "waveforms at these SNRs, e.g. 60,40,20")
     p.add_argument("--optimisers", metavar="LIST", help="three-section: comma-separated subset of ga,pso,cma")
-    p.add_argument("--cases", metavar="LIST", help="hv-transformer: comma-separated subset of 1,2a,2b,3")
+    p.add_argument("--cases", metavar="LIST", help="comma-separated subset of the cases: hv-transformer 1,2a,2b,3; "
+                   "two-section 1,2,3,4,5")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.add_argument("--diagnose", action="store_true", help="hv-transformer: also diagnose what the best "
                    "estimate still gets wrong (frequency-dependent elements, a missing section ...)")
     p.set_defaults(func=cmd_study)

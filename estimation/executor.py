@@ -21,6 +21,19 @@ already stored: nothing finished is repeated or lost.
 Results are returned as stored, i.e. after a JSON round trip (numpy arrays
 become lists, objects with ``to_dict()`` become dicts), so a fresh run and a
 resumed one give identical values.
+
+Each stored run carries a SHA-256 checksum of its content; a run file whose
+content no longer matches (edited, or damaged on disk) is refused with one
+line naming it. Runs started together on the same directory share the work:
+a task is claimed with an exclusive lock (``claims/<id>.lock``, released by
+the kernel when its holder dies) before it starts, so a second run takes only
+the unclaimed tasks and waits for the others to be stored.
+
+Ctrl-C (or SIGTERM turned into :class:`KeyboardInterrupt` by the caller)
+stops the pool at once and raises :class:`Interrupted`, whose message says
+how many runs are stored and that the same command resumes. Pool workers
+ignore SIGINT, run with their standard streams on ``/dev/null`` and exit
+within a second when the main process dies, even by SIGKILL.
 """
 
 from __future__ import annotations
@@ -28,6 +41,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import csv
 import dataclasses
+import hashlib
 import importlib
 import io
 import json
@@ -35,9 +49,11 @@ import math
 import multiprocessing
 import os
 import re
+import signal
 import socket
 import sys
 import tempfile
+import threading
 import time
 import traceback
 import uuid
@@ -51,7 +67,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Task", "TaskError", "ResultsStore", "run_tasks", "to_jsonable", "atomic_write_text"]
+__all__ = ["Task", "TaskError", "Interrupted", "ResultsStore", "run_tasks", "to_jsonable", "atomic_write_text"]
 
 _ID_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._=+-]{0,199}")
 
@@ -177,6 +193,14 @@ class TaskError(RuntimeError):
         self.results = results
 
 
+class Interrupted(KeyboardInterrupt):
+    """The run was interrupted (Ctrl-C, SIGTERM); finished runs are stored.
+
+    The message is one line, e.g. ``interrupted: 3 of 5 runs stored in DIR;
+    run the same command again to resume``.
+    """
+
+
 def _execute(fn: Callable[..., Any], kwargs: dict[str, Any]) -> dict[str, Any]:
     """Worker side: run one task, time it, catch its exception, make the result JSON-safe."""
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
@@ -225,6 +249,16 @@ def atomic_write_text(path: Path, text: str) -> None:
     _fsync_directory(path.parent)
 
 
+CHECKSUM_KEY = "sha256"
+
+
+def record_checksum(record: Mapping[str, Any]) -> str:
+    """SHA-256 (hex) of a stored record's canonical JSON text, the checksum key left out."""
+    body = {k: v for k, v in record.items() if k != CHECKSUM_KEY}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=True)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
     """Scalars (and short lists of scalars as JSON text) of a record, dotted keys."""
     if isinstance(value, dict):
@@ -259,8 +293,10 @@ class ResultsStore:
         self.runs_dir = self.directory / "runs"
         self.errors_dir = self.directory / "errors"
         self.csv_path = self.directory / "results.csv"
+        self.claims_dir = self.directory / "claims"
         self.runs_dir.mkdir(parents=True, exist_ok=True)
         self._records: dict[str, dict[str, Any]] = {}
+        self._claims: dict[str, int] = {}
         for path in sorted(self.runs_dir.glob("*.json")):
             if not path.name.startswith("."):
                 self._records[path.stem] = self._read(path)
@@ -270,9 +306,17 @@ class ResultsStore:
         try:
             record = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError) as exc:
-            raise ValueError(f"stored run {path} is unreadable ({exc}); delete it to run it again") from None
+            raise ValueError(f"stored run {path} is unreadable ({' '.join(str(exc).split())}); "
+                             f"delete it to run it again") from None
         if not isinstance(record, dict) or record.get("id") != path.stem:
             raise ValueError(f"stored run {path} does not hold a run with id {path.stem!r}")
+        stored = record.pop(CHECKSUM_KEY, None)
+        if stored is None:
+            raise ValueError(f"stored run {path} has no checksum (written by an older version or edited); "
+                             f"delete it to run it again")
+        if stored != record_checksum(record):
+            raise ValueError(f"stored run {path} fails its checksum (changed or damaged since it was written); "
+                             f"delete it to run it again")
         return record
 
     def __contains__(self, run_id: object) -> bool:
@@ -298,14 +342,70 @@ class ResultsStore:
         run_id = record.get("id")
         if not isinstance(run_id, str) or not _ID_PATTERN.fullmatch(run_id):
             raise ValueError(f"record id {run_id!r} must match {_ID_PATTERN.pattern}")
-        text = json.dumps(to_jsonable(record), indent=1)
+        stored = json.loads(json.dumps(to_jsonable(record)))
+        text = json.dumps({**stored, CHECKSUM_KEY: record_checksum(stored)}, indent=1)
         atomic_write_text(self.runs_dir / f"{run_id}.json", text + "\n")
-        stored = json.loads(text)
         self._records[run_id] = stored
         with suppress(FileNotFoundError):
             os.unlink(self.errors_dir / f"{run_id}.txt")
         self.write_csv()
         return stored
+
+    # ------------------------------------------------------------------ claims
+    def claim(self, run_id: str) -> str | dict[str, Any]:
+        """Try to claim a task before running it.
+
+        Returns
+        -------
+        str or dict
+            ``"claimed"`` (this process holds the lock until :meth:`release`),
+            ``"busy"`` (another process holds it), or the stored record when
+            another process has stored the run meanwhile.
+        """
+        if run_id in self._records:
+            return self._records[run_id]
+        import fcntl
+
+        self.claims_dir.mkdir(exist_ok=True)
+        path = self.claims_dir / f"{run_id}.lock"
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            return "busy"
+        record = self.refresh(run_id)
+        if record is not None:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+            return record
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{socket.gethostname()} {os.getpid()}\n".encode())
+        self._claims[run_id] = fd
+        return "claimed"
+
+    def release(self, run_id: str) -> None:
+        """Give up the claim on ``run_id`` (after storing it, or when stopping)."""
+        fd = self._claims.pop(run_id, None)
+        if fd is None:
+            return
+        with suppress(OSError):
+            if run_id in self._records:
+                os.unlink(self.claims_dir / f"{run_id}.lock")  # harmless race: holders re-check the store
+        os.close(fd)  # closing releases the lock
+
+    def release_all(self) -> None:
+        """Give up every claim this store holds."""
+        for run_id in list(self._claims):
+            self.release(run_id)
+
+    def refresh(self, run_id: str) -> dict[str, Any] | None:
+        """Load ``run_id`` if another process stored it since this store was opened."""
+        if run_id not in self._records:
+            path = self.runs_dir / f"{run_id}.json"
+            if path.exists():
+                self._records[run_id] = self._read(path)
+        return self._records.get(run_id)
 
     def save_error(self, run_id: str, text: str) -> Path:
         """Keep the traceback of a failed run in ``errors/<id>.txt`` (not a finished run)."""
@@ -316,6 +416,10 @@ class ResultsStore:
 
     def write_csv(self) -> Path:
         """Regenerate ``results.csv`` (one row per run, flattened scalars) atomically."""
+        for path in self.runs_dir.glob("*.json"):  # runs stored by another process on the same directory
+            if not path.name.startswith(".") and path.stem not in self._records:
+                with suppress(ValueError):
+                    self._records[path.stem] = self._read(path)
         rows = []
         columns = list(self.BASE_COLUMNS)
         for record in self.records():
@@ -350,13 +454,29 @@ class _SerialBackend:
     def __init__(self) -> None:
         self._cancelled = False
 
-    def run(self, jobs: list[tuple[int, Task]]) -> Iterator[tuple[int, dict[str, Any]]]:
-        for index, task in jobs:
-            if self._cancelled:
-                return
+    def run(self, jobs: list[tuple[int, Task]], claim: Any = None) -> Iterator[tuple[int, dict[str, Any]]]:
+        queue = deque(jobs)
+        busy = 0
+        while queue and not self._cancelled:
+            index, task = queue.popleft()
+            status = claim(task) if claim is not None else "claimed"
+            if status == "busy":  # another run on the same directory has it: come back to it later
+                queue.append((index, task))
+                busy += 1
+                if busy >= len(queue):
+                    time.sleep(_POLL_S)
+                    busy = 0
+                continue
+            busy = 0
+            if isinstance(status, dict):
+                yield index, {"ok": True, "stored": status}
+                continue
             yield index, _execute(task.fn, dict(task.kwargs))
 
     def cancel(self) -> None:
+        self._cancelled = True
+
+    def abort(self) -> None:
         self._cancelled = True
 
     def close(self, wait: bool) -> None:
@@ -379,23 +499,36 @@ class _WindowBackend:
     def submit(self, task: Task) -> Any:
         raise NotImplementedError
 
-    def wait_first(self, futures: list[Any]) -> list[Any]:
-        """Futures among ``futures`` that are done (at least one), in the given order."""
+    def wait_first(self, futures: list[Any], timeout: float | None = None) -> list[Any]:
+        """Futures among ``futures`` that are done (at least one unless ``timeout`` s passed), in the given order."""
         raise NotImplementedError
 
     def capacity(self) -> int:
         raise NotImplementedError
 
-    def run(self, jobs: list[tuple[int, Task]]) -> Iterator[tuple[int, dict[str, Any]]]:
+    def run(self, jobs: list[tuple[int, Task]], claim: Any = None) -> Iterator[tuple[int, dict[str, Any]]]:
         queue = deque(jobs)
         in_flight: dict[Any, int] = {}
         while queue or in_flight:
-            while queue and not self._stopped and len(in_flight) < max(1, self.capacity()):
+            busy = 0
+            while queue and not self._stopped and len(in_flight) < max(1, self.capacity()) and busy < len(queue):
                 index, task = queue.popleft()
+                status = claim(task) if claim is not None else "claimed"
+                if status == "busy":  # another run on the same directory has it: come back to it later
+                    queue.append((index, task))
+                    busy += 1
+                    continue
+                busy = 0
+                if isinstance(status, dict):
+                    yield index, {"ok": True, "stored": status}
+                    continue
                 in_flight[self.submit(task)] = index
             if not in_flight:
-                return
-            for future in self.wait_first(list(in_flight)):
+                if not queue or self._stopped:
+                    return
+                time.sleep(_POLL_S)
+                continue
+            for future in self.wait_first(list(in_flight), _POLL_S if busy else None):
                 index = in_flight.pop(future)
                 try:
                     outcome = future.result()
@@ -420,8 +553,8 @@ class _FuturesBackend(_WindowBackend):
     def submit(self, task: Task) -> cf.Future[Any]:
         return self.executor.submit(_execute, task.fn, dict(task.kwargs))
 
-    def wait_first(self, futures: list[Any]) -> list[Any]:
-        done, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
+    def wait_first(self, futures: list[Any], timeout: float | None = None) -> list[Any]:
+        done, _ = cf.wait(futures, timeout=timeout, return_when=cf.FIRST_COMPLETED)
         return [f for f in futures if f in done]
 
     def capacity(self) -> int:
@@ -430,6 +563,20 @@ class _FuturesBackend(_WindowBackend):
     def close(self, wait: bool) -> None:
         if self.owned:
             self.executor.shutdown(wait=wait, cancel_futures=True)
+
+    def abort(self) -> None:
+        """Stop now: cancel what has not started and end the owned pool's workers (their runs are lost)."""
+        self._stopped = True
+        if not self.owned:
+            return
+        processes = list((getattr(self.executor, "_processes", None) or {}).values())
+        self.executor.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            with suppress(Exception):
+                process.terminate()
+        for process in processes:
+            with suppress(Exception):
+                process.join(2.0)
 
 
 class _DaskBackend(_WindowBackend):
@@ -455,7 +602,7 @@ class _DaskBackend(_WindowBackend):
         self._completed.add(future)
         return future
 
-    def wait_first(self, futures: list[Any]) -> list[Any]:
+    def wait_first(self, futures: list[Any], timeout: float | None = None) -> list[Any]:
         return [next(self._completed)]
 
     def capacity(self) -> int:
@@ -465,19 +612,60 @@ class _DaskBackend(_WindowBackend):
         if self.owned:
             self.client.close()
 
+    def abort(self) -> None:
+        self._stopped = True
+        if self.owned:
+            with suppress(Exception):
+                self.client.close(timeout=5)
+
 
 def _is_dask_client(obj: Any) -> bool:
     return type(obj).__module__.split(".")[0] == "distributed" and hasattr(obj, "submit")
 
 
+def _start_forkserver_detached() -> None:
+    """Start multiprocessing's fork server (and resource tracker) with ``/dev/null`` as standard streams.
+
+    Pool workers are forked from the fork server and inherit its streams: so
+    neither they nor the server hold the caller's pipes open, and nothing a
+    worker prints reaches the terminal (task errors travel back as results).
+    """
+    from multiprocessing import forkserver
+
+    server = getattr(forkserver, "_forkserver", None)
+    if server is not None and getattr(server, "_forkserver_pid", None) is not None:
+        return
+    with suppress(ValueError, OSError):
+        sys.stdout.flush()
+        sys.stderr.flush()
+    try:
+        saved = [os.dup(fd) for fd in (0, 1, 2)]
+    except OSError:
+        forkserver.ensure_running()
+        return
+    null = os.open(os.devnull, os.O_RDWR)
+    try:
+        for fd in (0, 1, 2):
+            os.dup2(null, fd)
+        forkserver.ensure_running()
+    finally:
+        for fd, copy in zip((0, 1, 2), saved):
+            os.dup2(copy, fd)
+            os.close(copy)
+        os.close(null)
+
+
 def _process_pool(workers: int) -> cf.ProcessPoolExecutor:
     # forkserver (Python 3.14's default) avoids forking a process that may run threads.
     methods = multiprocessing.get_all_start_methods()
-    context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
-    from ._threads import single_threaded_blas
+    method = "forkserver" if "forkserver" in methods else "spawn"
+    if method == "forkserver":
+        _start_forkserver_detached()
+    context = multiprocessing.get_context(method)
+    from ._workers import init_worker
 
-    initializer = single_threaded_blas if workers > 1 else None
-    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=initializer)
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=init_worker,
+                                  initargs=(os.getpid(), workers > 1))
 
 
 def _make_backend(executor: Any, workers: int | None, jobs: int) -> Any:
@@ -507,6 +695,9 @@ def _make_backend(executor: Any, workers: int | None, jobs: int) -> Any:
 # --------------------------------------------------------------------------- #
 # run_tasks
 # --------------------------------------------------------------------------- #
+
+
+_POLL_S = 0.25  # how often a run waiting for tasks claimed by another run looks again, s
 
 
 def _check_tasks(tasks: Iterable[Task]) -> list[Task]:
@@ -636,28 +827,60 @@ def _run_backend(
     progress: bool,
     on_error: str,
 ) -> dict[str, str]:
-    """Drive ``backend`` over ``todo``; store and report each outcome; return failures."""
+    """Drive ``backend`` over ``todo``; store and report each outcome; return failures.
+
+    With a store, each task is claimed before it starts (runs on the same
+    directory share the work); Ctrl-C ends the pool and raises
+    :class:`Interrupted`.
+    """
     finished = len(tasks) - len(todo)
     failures: dict[str, str] = {}
     completed = False
+
+    def claim(task: Task) -> str | dict[str, Any]:
+        assert store is not None
+        status = store.claim(task.id)
+        if isinstance(status, dict):
+            _check_stored(status, task, store)
+        return status
+
     try:
-        for index, outcome in backend.run(todo):
+        for index, outcome in backend.run(todo, claim if store is not None else None):
             finished += 1
             task = tasks[index]
-            if outcome["ok"]:
-                record = _record(task, outcome, backend.name)
-                stored = store.save(record) if store is not None else _roundtrip(record)
-                results[index] = stored["result"]
-                _say(progress, f"[{finished}/{len(tasks)}] {task.name} done in {outcome['wall_s']:.1f} s")
+            if "stored" in outcome:
+                results[index] = outcome["stored"]["result"]
+                _say(progress, f"[{finished}/{len(tasks)}] {task.name} stored by another run")
                 continue
-            failures[task.id] = outcome["traceback"]
-            if store is not None:
-                store.save_error(task.id, outcome["traceback"])
+            try:
+                if outcome["ok"]:
+                    record = _record(task, outcome, backend.name)
+                    stored = store.save(record) if store is not None else _roundtrip(record)
+                    results[index] = stored["result"]
+                    _say(progress, f"[{finished}/{len(tasks)}] {task.name} done in {outcome['wall_s']:.1f} s")
+                    continue
+                failures[task.id] = outcome["traceback"]
+                if store is not None:
+                    store.save_error(task.id, outcome["traceback"])
+            finally:
+                if store is not None:
+                    store.release(task.id)
             last = outcome["traceback"].strip().splitlines()[-1]
             _say(progress, f"[{finished}/{len(tasks)}] {task.name} FAILED: {last}")
             if on_error == "raise":
                 backend.cancel()
         completed = True
+    except KeyboardInterrupt:
+        backend.abort()
+        if store is not None:
+            store.release_all()
+            done = sum(1 for t in tasks if t.id in store)
+            raise Interrupted(f"interrupted: {done} of {len(tasks)} runs stored in {store.directory}; "
+                              f"run the same command again to resume") from None
+        done = sum(1 for r in results if r is not None)
+        raise Interrupted(f"interrupted: {done} of {len(tasks)} runs finished (no results directory)") from None
     finally:
+        if store is not None:
+            store.release_all()
         backend.close(wait=completed)
     return failures

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import warnings
 from collections.abc import Sequence
@@ -33,8 +34,31 @@ class UsageError(ValueError):
     """Bad command-line input."""
 
 
+class Interrupted(KeyboardInterrupt):
+    """The command was stopped by Ctrl-C or SIGTERM; the message says what was kept (exit status 130)."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """Argument parser whose errors are one line on stderr (exit status 2), not the usage text."""
+
+    def error(self, message: str) -> Any:  # type: ignore[override]
+        text = " ".join(str(message).split())
+        self.exit(2, f"{self.prog}: error: {text} (see {self.prog} --help)\n")
+
+
+def _finite_json(obj: Any) -> Any:
+    """Copy of ``obj`` with non-finite floats as None (strict JSON has no NaN or Infinity)."""
+    if isinstance(obj, float):
+        return obj if obj == obj and obj not in (float("inf"), float("-inf")) else None
+    if isinstance(obj, dict):
+        return {k: _finite_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_json(v) for v in obj]
+    return obj
+
+
 def _emit(obj: Any) -> None:
-    sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
+    sys.stdout.write(json.dumps(_finite_json(obj), allow_nan=False) + "\n")
 
 
 def _complex_json(values: np.ndarray) -> dict[str, list[float]]:
@@ -75,7 +99,14 @@ def load_circuit(args: argparse.Namespace) -> tuple[Circuit, Model | None]:
         circuit = model.circuit
     sets = parse_sets(args.set)
     if sets:
-        circuit = circuit.with_values(sets)
+        from .errors import CircuitError
+        from .netlist import check_ranges
+
+        try:
+            circuit = circuit.with_values(sets)
+            check_ranges(circuit)
+        except CircuitError as exc:
+            raise UsageError(f"--set: {exc}") from None
         if model is not None:
             model = Model(model.name, model.description, circuit, model.configurations, model.fixed)
     return circuit, model
@@ -215,7 +246,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 # ---------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="pris-cosim", description="PRIS perturbation, circuits, FMUs and estimation")
+    parser = OneLineParser(prog="pris-cosim", description="PRIS perturbation, circuits, FMUs and estimation")
     parser.add_argument("--version", action="version", version=f"pris-cosim {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _frf_parser(sub)
@@ -233,20 +264,71 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``pris-cosim`` console script."""
+    """Entry point of the ``pris-cosim`` console script.
+
+    Returns the exit status: 0 on success, 2 for bad input (one line on
+    stderr naming the file, line and column, the element or the option), 130
+    when interrupted by Ctrl-C or SIGTERM (one line saying what was kept),
+    1 for an internal error (one line; ``PRIS_COSIM_TRACEBACK=1`` prints the
+    traceback).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
-    warnings.simplefilter("default", NonPassiveWarning)
-    warnings.showwarning = _show_warning
+    prefix = f"pris-cosim {args.command}"
+    restore = _terminate_as_interrupt()
     try:
-        return int(args.func(args) or 0)
-    except (ValueError, OSError) as exc:
-        print(f"pris-cosim {args.command}: error: {exc}", file=sys.stderr)
+        with warnings.catch_warnings():
+            warnings.simplefilter("default", NonPassiveWarning)
+            # A numerical warning that reaches this level becomes the one-line error below.
+            warnings.filterwarnings("error", category=RuntimeWarning)
+            warnings.showwarning = _show_warning
+            from .cli_checks import check_options
+
+            check_options(args)
+            return int(args.func(args) or 0)
+    except KeyboardInterrupt as exc:
+        text = _one_line(exc) if str(exc) else "interrupted"
+        print(f"{prefix}: {text}", file=sys.stderr, flush=True)
+        return 130
+    except RuntimeWarning as exc:
+        print(f"{prefix}: error: numerical problem: {_one_line(exc)} (values outside the range the arithmetic "
+              f"can resolve)", file=sys.stderr)
         return 2
+    except (ValueError, OSError, ArithmeticError, RecursionError, MemoryError) as exc:
+        print(f"{prefix}: error: {_one_line(exc) or type(exc).__name__}", file=sys.stderr)
+        return 2
+    except Exception as exc:
+        if os.environ.get("PRIS_COSIM_TRACEBACK"):
+            raise
+        print(f"{prefix}: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              f"(PRIS_COSIM_TRACEBACK=1 shows the traceback)", file=sys.stderr)
+        return 1
+    finally:
+        restore()
+
+
+def _one_line(exc: BaseException, limit: int = 2000) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _terminate_as_interrupt() -> Any:
+    """Make SIGTERM raise :class:`Interrupted` in the main thread; returns a function that undoes it."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def on_term(signum: int, frame: Any) -> None:
+        raise Interrupted()
+
+    previous = signal.signal(signal.SIGTERM, on_term)
+    return lambda: signal.signal(signal.SIGTERM, previous)
 
 
 def _show_warning(message: Any, category: Any, filename: str, lineno: int, file: Any = None, line: Any = None) -> None:
-    print(f"pris-cosim: warning: {message}", file=sys.stderr)
+    print(f"pris-cosim: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -540,6 +540,50 @@ def _parse_rows(
     return out
 
 
+#: Frequencies accepted in measured data, Hz.
+FREQUENCY_RANGE_HZ = (1e-6, 1e12)
+#: Magnitudes accepted for a response value (any unit): outside, the arithmetic of fits overflows.
+MAGNITUDE_RANGE = (1e-30, 1e30)
+#: Sampling intervals accepted in waveform data, s.
+TIME_STEP_RANGE_S = (1e-15, 1e3)
+
+
+def _responses_in_range(path: PathLike, data: "MeasuredResponses") -> "MeasuredResponses":
+    """Refuse frequencies and response magnitudes outside the accepted physical ranges (one line)."""
+    lo, hi = FREQUENCY_RANGE_HZ
+    f = data.frequency_hz
+    bad = np.flatnonzero((f < lo) | (f > hi))
+    if bad.size:
+        raise MeasuredDataError(path, f"frequency {_r(f[bad[0]])} Hz (point {int(bad[0]) + 1}) is outside the "
+                                      f"accepted range {lo:g} .. {hi:g} Hz")
+    mlo, mhi = MAGNITUDE_RANGE
+    for name, v in data.responses.items():
+        mag = np.abs(v)
+        bad = np.flatnonzero(~((mag >= mlo) & (mag <= mhi)))
+        if bad.size:
+            k = int(bad[0])
+            raise MeasuredDataError(path, f"response {name!r} at {_r(f[k])} Hz (point {k + 1}): magnitude "
+                                          f"{_r(mag[k])} is outside the accepted range {mlo:g} .. {mhi:g}")
+    return data
+
+
+def _waveforms_in_range(path: PathLike, w: "Waveforms") -> "Waveforms":
+    """Refuse sampling intervals and values outside the accepted physical ranges (one line)."""
+    lo, hi = TIME_STEP_RANGE_S
+    if w.time_s.size > 1 and not lo <= w.dt <= hi:
+        raise MeasuredDataError(path, f"sampling interval {_r(w.dt)} s is outside the accepted range "
+                                      f"{lo:g} .. {hi:g} s", column_name="time_s")
+    if np.max(np.abs(w.time_s)) > 1e9:
+        raise MeasuredDataError(path, "time_s values beyond 1e9 s", column_name="time_s")
+    for name in w.names[1:]:
+        v = getattr(w, name)
+        big = np.flatnonzero(np.abs(v) > MAGNITUDE_RANGE[1])
+        if big.size:
+            raise MeasuredDataError(path, f"sample {int(big[0]) + 1}: value {_r(v[big[0]])} beyond "
+                                          f"{MAGNITUDE_RANGE[1]:g}", column_name=name)
+    return w
+
+
 def _check_rows_frequency(
     path: PathLike, f: np.ndarray, lines: Sequence[int], col: int = 1, name: str = "frequency_hz"
 ) -> None:
@@ -954,7 +998,8 @@ def _read_segmented(
         data = _parse_rows(path, rows, cells)
         _check_count(path, data.shape[0], last_line)
         lines_no = [r[0] for r in rows]
-        f = data[:, 0] * fscale
+        with np.errstate(over="ignore"):  # an overflow to inf is refused by the range check
+            f = data[:, 0] * fscale
         _check_rows_frequency(path, f, lines_no, 1, cells[0])
         if form == "magphase":
             _check_nonnegative(path, data[:, 1], lines_no, 2, cells[1])
@@ -965,7 +1010,7 @@ def _read_segmented(
     if seg.comment:
         comments.append(seg.comment)
     comments.extend(seg.comments)
-    return MeasuredResponses(f, responses, source=os.fspath(path), comments=comments, segment=seg.label)
+    return _responses_in_range(path, MeasuredResponses(f, responses, source=os.fspath(path), comments=comments, segment=seg.label))
 
 
 def read_response_csv(path: PathLike, segment: str | int | None = None) -> MeasuredResponses:
@@ -1265,9 +1310,9 @@ def read_mag_phase_rows(
         k = k + 1.0
     _check_count(path, data.shape[0], rows[-1][0], "data rows after the DC row" if has_dc_row else "data rows")
     f = k * df
-    return MeasuredResponses(
+    return _responses_in_range(path, MeasuredResponses(
         f, {name: _polar(data[:, 0], data[:, 1])}, source=os.fspath(path), comments=comments
-    )
+    ))
 
 
 def write_mag_phase_rows(
@@ -1439,7 +1484,8 @@ def read_e4990a(
     data = _parse_rows(path, rows, cells)
     _check_count(path, data.shape[0], end_line or hline)
     line_no = [r[0] for r in rows]
-    f = data[:, 0] * fscale
+    with np.errstate(over="ignore"):  # an overflow to inf is refused by the range check
+        f = data[:, 0] * fscale
     _check_rows_frequency(path, f, line_no, 1, cells[0])
     if form == "magphase":
         _check_nonnegative(path, data[:, 1], line_no, 2, cells[1])
@@ -1447,7 +1493,7 @@ def read_e4990a(
     else:
         z = data[:, 1] + 1j * data[:, 2]
     rname = name if name is not None else f"{family}in"
-    return MeasuredResponses(f, {rname: z}, source=os.fspath(path), comments=comments)
+    return _responses_in_range(path, MeasuredResponses(f, {rname: z}, source=os.fspath(path), comments=comments))
 
 
 def write_e4990a(
@@ -1815,7 +1861,11 @@ def read_mat(path: PathLike) -> MeasuredResponses:
         raw = scipy.io.loadmat(os.fspath(path), squeeze_me=False, chars_as_strings=True)
     except NotImplementedError:
         raise MeasuredDataError(path, "MATLAB v7.3 (HDF5) files are not supported; save with -v7") from None
-    except (ValueError, TypeError, IndexError, KeyError, EOFError) as exc:
+    except OSError as exc:
+        if not Path(path).is_file():
+            raise MeasuredDataError(path, f"cannot read file ({exc.strerror or exc})") from None
+        raise MeasuredDataError(path, f"not a readable MATLAB file (truncated or corrupt: {exc})") from None
+    except Exception as exc:  # scipy's MatReadError and the errors of corrupt streams
         raise MeasuredDataError(path, f"not a readable MATLAB file ({exc})") from None
     vars_ = {k: v for k, v in raw.items() if not k.startswith("__")}
 
@@ -1835,7 +1885,8 @@ def read_mat(path: PathLike) -> MeasuredResponses:
         a = a.ravel()
         bad = np.flatnonzero(~np.isfinite(a))
         if bad.size:
-            raise err(var, f"element {int(bad[0]) + 1}: non-finite value {_r(a[bad[0]])}")
+            x = a[bad[0]]
+            raise err(var, f"element {int(bad[0]) + 1}: non-finite value {_r(x) if np.isrealobj(x) else repr(complex(x))}")
         return a
 
     f = vector(fkey)
@@ -1915,7 +1966,7 @@ def read_mat(path: PathLike) -> MeasuredResponses:
     if "segment" in vars_:
         seg = _mat_strings(vars_["segment"])
         segment = seg[0] if seg else None
-    return MeasuredResponses(f, responses, source=os.fspath(path), comments=comments, segment=segment)
+    return _responses_in_range(path, MeasuredResponses(f, responses, source=os.fspath(path), comments=comments, segment=segment))
 
 
 def write_mat(path: PathLike, data: MeasuredResponses) -> None:
@@ -2044,10 +2095,10 @@ def read_waveform_csv(path: PathLike) -> Waveforms:
         i, reason = bad
         raise MeasuredDataError(path, reason, rows()[i][0], seen["time_s"] + 1, "time_s")
     col = {c: data[:, j].copy() for c, j in seen.items()}
-    return Waveforms(
+    return _waveforms_in_range(path, Waveforms(
         col["time_s"], col["v_bprbs"], col["v_in"], col["i_in"], col.get("v_out"),
         source=os.fspath(path), comments=comments,
-    )
+    ))
 
 
 def write_waveform_csv(

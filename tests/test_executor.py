@@ -5,6 +5,9 @@ from __future__ import annotations
 import csv
 import json
 import os
+import signal
+import subprocess
+import sys
 import time
 import uuid
 from pathlib import Path
@@ -62,8 +65,10 @@ def executions(marker_dir: Path) -> dict[int, int]:
     return counts
 
 
-def counted_tasks(marker_dir: Path, count: int) -> list[Task]:
-    return [Task(f"t{x}", counted, {"x": x, "marker_dir": str(marker_dir)}, label=f"case {x}") for x in range(count)]
+def counted_tasks(marker_dir: Path, count: int, delay: float = 0.0) -> list[Task]:
+    extra = {"delay": delay} if delay else {}
+    return [Task(f"t{x}", counted, {"x": x, "marker_dir": str(marker_dir), **extra}, label=f"case {x}")
+            for x in range(count)]
 
 
 def optimise_tasks() -> list[Task]:
@@ -326,3 +331,180 @@ def test_bad_arguments_name_the_problem(make, match):
 def test_without_store_results_are_still_json_normalised(markers):
     results = run_tasks(counted_tasks(markers, 2), executor="serial", progress=False)
     assert results[1]["vector"] == [0, 1, 2]
+
+
+# --------------------------------------------------------------------------- #
+# Checksums, claims and the interruption message
+# --------------------------------------------------------------------------- #
+
+
+def test_tampered_or_damaged_run_is_refused_naming_the_file(markers, tmp_path):
+    run_tasks(counted_tasks(markers, 2), executor="serial", store=tmp_path / "s", progress=False)
+    path = tmp_path / "s" / "runs" / "t1.json"
+    text = path.read_text()
+    assert '"sha256"' in text
+    path.write_text(text.replace('"y": 1', '"y": 2'))  # a changed value, still valid JSON
+    with pytest.raises(ValueError, match=r"stored run .*t1\.json fails its checksum") as caught:
+        ResultsStore(tmp_path / "s")
+    assert "\n" not in str(caught.value)
+    flipped = bytearray(text.encode())
+    flipped[text.index('"x": 1') + 5] ^= 0x02  # one bit: 1 -> 3
+    path.write_bytes(bytes(flipped))
+    with pytest.raises(ValueError, match="fails its checksum"):
+        ResultsStore(tmp_path / "s")
+    path.write_text(text.replace('"sha256"', '"other"'))
+    with pytest.raises(ValueError, match="has no checksum"):
+        ResultsStore(tmp_path / "s")
+
+
+def test_a_claimed_task_is_busy_for_another_store_until_released(tmp_path):
+    a, b = ResultsStore(tmp_path), ResultsStore(tmp_path)
+    assert a.claim("x") == "claimed"
+    assert b.claim("x") == "busy"
+    a.save({"id": "x", "result": 5})
+    a.release("x")
+    assert b.claim("x")["result"] == 5  # stored meanwhile: taken, not run again
+    assert b.claim("y") == "claimed"
+    b.release_all()
+    assert a.claim("y") == "claimed"
+
+
+def test_interrupt_message_counts_stored_runs(markers, tmp_path):
+    (markers / "STOP-2").touch()
+    with pytest.raises(ex.Interrupted) as caught:
+        run_tasks(counted_tasks(markers, 4), executor="serial", store=tmp_path / "s", progress=False)
+    assert str(caught.value) == (f"interrupted: 2 of 4 runs stored in {tmp_path / 's'}; "
+                                 f"run the same command again to resume")
+
+
+# --------------------------------------------------------------------------- #
+# A real study (two-section, quick, cases 4 and 1): killed, resumed, run twice at once, reproducible
+# --------------------------------------------------------------------------- #
+
+STUDY = [sys.executable, "-m", "pris_cosim", "study", "two-section", "--quick", "--cases", "4,1", "--json"]
+_VOLATILE = ("wall_s", "per_eval_s", "setup_s", "speedup", "runtime", "evals_per_s", "time_s", "out", "table")
+
+
+def _start(out: Path, workers: int) -> subprocess.Popen:
+    return subprocess.Popen(STUDY + ["--workers", str(workers), "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def _finish(proc: subprocess.Popen, timeout: float = 120) -> tuple[int, str, str]:
+    out, err = proc.communicate(timeout=timeout)
+    return proc.returncode, out, err
+
+
+def _stable(obj):
+    """The study's answer without wall times and paths."""
+    if isinstance(obj, dict):
+        return {k: _stable(v) for k, v in obj.items() if not any(w in k for w in _VOLATILE)}
+    if isinstance(obj, list):
+        return [_stable(v) for v in obj]
+    return obj
+
+
+def _assert_same(a, b, path="rows"):
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), path
+        for k in a:
+            _assert_same(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, list):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _assert_same(x, y, f"{path}[{i}]")
+    elif isinstance(a, float) and isinstance(b, float):
+        assert a == pytest.approx(b, rel=1e-12, abs=1e-300), path
+    else:
+        assert a == b, path
+
+
+def _wait_for_runs(out: Path, count: int, proc: subprocess.Popen, timeout: float = 90) -> None:
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        if len(list((out / "runs").glob("*.json"))) >= count:
+            return
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.05)
+    raise AssertionError(f"no stored run in {out} after {timeout} s")
+
+
+def _group_gone(pgid: int, timeout: float) -> bool:
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.05)
+    return False
+
+
+@pytest.fixture(scope="module")
+def killed_then_resumed(tmp_path_factory):
+    """The study on two workers, its main process killed by SIGKILL after the first stored run, then resumed.
+
+    Returns what the test of the kill checks and the resumed answer (the reference of the other tests).
+    """
+    out = tmp_path_factory.mktemp("killed") / "out"
+    proc = _start(out, 2)
+    _wait_for_runs(out, 1, proc)
+    t0 = time.monotonic()
+    proc.kill()  # the main process only, as the OOM killer or a batch scheduler does
+    proc.communicate(timeout=5)  # EOF on stdout and stderr: nothing else holds the pipes
+    pipes_s = time.monotonic() - t0
+    gone = _group_gone(proc.pid, 5 - pipes_s)
+    stored = ResultsStore(out).ids()  # complete files that pass their checksums
+    code, stdout, stderr = _finish(_start(out, 2))
+    assert code == 0, stderr
+    return {"pipes_s": pipes_s, "gone": gone, "stored": stored, "resume_err": stderr,
+            "rows": _stable(json.loads(stdout)["rows"])}
+
+
+def test_sigkill_of_the_main_process_ends_its_workers_and_frees_the_pipes(killed_then_resumed):
+    assert killed_then_resumed["pipes_s"] < 5 and killed_then_resumed["gone"], "workers outlived the main process"
+    assert len(killed_then_resumed["stored"]) >= 1
+    assert f"{len(killed_then_resumed['stored'])} already stored" in killed_then_resumed["resume_err"]
+
+
+def test_ctrl_c_to_the_group_stops_with_one_line_and_resume_gives_the_same_answer(tmp_path, killed_then_resumed):
+    out = tmp_path / "out"
+    proc = _start(out, 1)
+    _wait_for_runs(out, 1, proc)
+    os.killpg(proc.pid, signal.SIGINT)  # as Ctrl-C on a terminal: main process, fork server and workers
+    code, stdout, stderr = _finish(proc, timeout=10)
+    assert code == 130 and stdout == ""
+    last = stderr.strip().splitlines()[-1]
+    assert last == f"pris-cosim study: interrupted: 1 of 2 runs stored in {out}; run the same command again to resume"
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
+    assert _group_gone(proc.pid, 5)
+    stored = (out / "runs" / "two-section-case4-quick-seed1.json").read_text()
+    code, stdout, stderr = _finish(_start(out, 1))
+    assert code == 0, stderr
+    assert "1 already stored, 1 to run" in stderr
+    assert (out / "runs" / "two-section-case4-quick-seed1.json").read_text() == stored  # not run again
+    # the same numbers on one worker as on two, resumed at different points
+    _assert_same(_stable(json.loads(stdout)["rows"]), killed_then_resumed["rows"])
+
+
+_SHARE = """
+import json, sys
+from estimation.executor import run_tasks
+from test_executor import counted_tasks
+from pathlib import Path
+results = run_tasks(counted_tasks(Path(sys.argv[1]), 6, delay=0.3), executor="serial", store=sys.argv[2])
+print(json.dumps(results))
+"""
+
+
+def test_two_runs_on_one_directory_share_the_tasks(markers, tmp_path):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), *sys.path])}
+    procs = [subprocess.Popen([sys.executable, "-c", _SHARE, str(markers), str(tmp_path / "s")], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    outputs = [p.communicate(timeout=60) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], outputs
+    first, second = (json.loads(out) for out, _ in outputs)
+    assert first == second and [r["y"] for r in first] == [x * x for x in range(6)]
+    assert executions(markers) == {x: 1 for x in range(6)}  # every task computed once in all
+    errs = outputs[0][1] + outputs[1][1]
+    assert errs.count("done in") == 6 and errs.count("stored by another run") == 6, errs

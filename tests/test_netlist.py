@@ -68,12 +68,12 @@ def test_continuation_line():
 @pytest.mark.parametrize(
     "text, match",
     [
-        ("* t\nR1 a 0 1x2\n", r"<netlist>:2: .*'R1'"),
-        ("* t\nR1 a 0\n", r":2: element 'R1' needs two nodes and a value"),
-        ("* t\nQ1 a b c model\n", r":2: element type 'Q'"),
-        ("* t\n.param a=\n", r":2: cannot parse .param"),
-        ("* t\nR1 a 0 1\nR1 b 0 2\n", r":3: element 'R1' is defined twice"),
-        ("* t\n.subckt foo a b\n", r":2: .subckt is not supported"),
+        ("* t\nR1 a 0 1x2\n", r"<netlist>:2:8: .*'R1'"),
+        ("* t\nR1 a 0\n", r":2:1: element 'R1' needs two nodes and a value"),
+        ("* t\nQ1 a b c model\n", r":2:1: element type 'Q'"),
+        ("* t\n.param a=\n", r":2:9: cannot parse .param"),
+        ("* t\nR1 a 0 1\nR1 b 0 2\n", r":3:1: element 'R1' is defined twice"),
+        ("* t\n.subckt foo a b\n", r":2:1: .subckt is not supported"),
         ("* t\n*@ port zz\nR1 a 0 1\n", r"port 'zz' is not a node"),
     ],
 )

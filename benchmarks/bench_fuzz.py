@@ -1,0 +1,111 @@
+"""Long fuzz run: at least 1000 generated inputs per reader and a mutated-option run per command.
+
+Prints, per reader and command, how many inputs were accepted (``ok``), refused
+with one line (``rejected``) and how many broke the contract (tracebacks,
+several lines, leaked warnings, NaN in JSON, hangs), with one example of each
+failure. The CI tests run the same generators with a fixed seed and a few
+dozen inputs each (tests/test_fuzz.py).
+
+Usage::
+
+    python benchmarks/bench_fuzz.py [--count 1000] [--seed 0] [--only netlist,touchstone] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+import test_fuzz_cases as fc  # noqa: E402
+
+
+def run_reader(name: str, count: int, seed: int, tmp: Path) -> fc.Tally:
+    tally = fc.Tally()
+    rng = random.Random(f"{name}-{seed}")
+    for i in range(count):
+        if name == "netlist":
+            path = tmp / f"n{i}.cir"
+            path.write_bytes(fc.netlist_case(rng))
+            verdict, outcome = fc.check_netlist_cli(path)
+            tally.add(verdict, f"{path.read_bytes()[:200]!r} -> {outcome.stderr.strip()[:200] or outcome.exception}")
+        elif name == "values":
+            text = rng.choice(fc.NASTY_VALUES) if rng.random() < 0.3 else _random_value(rng)
+            tally.add(fc.check_value(text), repr(text[:80]))
+        elif name == "mat":
+            path = fc.mat_case(rng, tmp)
+            tally.add(fc.check_measured(path), str(path))
+        elif name == "options":
+            argv, option = option_case(rng, tmp)
+            outcome = fc.run_cli(argv)
+            verdict = fc.judge(outcome, [option, option.lstrip("-")], json_mode="--json" in argv)
+            tally.add(verdict, f"{' '.join(a[:60] for a in argv)} -> {outcome.stderr.strip()[:200] or outcome.exception}")
+        else:
+            ext, data = fc.FILE_READERS[name](rng)
+            path = tmp / f"{name}{i}{ext}"
+            path.write_bytes(data)
+            tally.add(fc.check_measured(path), f"{data[:200]!r}")
+    return tally
+
+
+def _random_value(rng: random.Random) -> str:
+    alphabet = "0123456789.eE+-*/^(){} kmunpfgtMEGxabl_sqrtlogpi\u00b5"
+    return "".join(rng.choice(alphabet) for _ in range(rng.randint(1, 24)))
+
+
+def option_case(rng: random.Random, tmp: Path) -> tuple[list[str], str]:
+    """A cheap valid command with one option replaced by a random (mostly bad) value."""
+    base, options = rng.choice(fc.OPTION_FUZZ)
+    argv = [a.replace("{tmp}", str(tmp)) for a in base]
+    option = rng.choice(options)
+    value = rng.choice(fc.BAD_OPTION_VALUES) if rng.random() < 0.7 else _random_value(rng)
+    if not option.startswith("-"):
+        return argv[:1] + [value] + argv[1:], option
+    if option in argv:
+        argv[argv.index(option) + 1] = value
+    else:
+        argv[-1:-1] = [option, value]
+    return argv, option
+
+
+READERS = ["netlist", "values", "response-csv", "multisegment-csv", "waveform-csv", "touchstone", "e4990a",
+           "mag-phase-rows", "mat", "options"]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--count", type=int, default=1000, help="inputs per reader (default 1000)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--only", help="comma-separated readers: " + ",".join(READERS))
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    names = args.only.split(",") if args.only else READERS
+    results = {}
+    with tempfile.TemporaryDirectory(prefix="bench-fuzz-") as tmp:
+        for name in names:
+            t0 = time.perf_counter()
+            directory = Path(tmp) / name
+            directory.mkdir()
+            count = args.count if name != "options" else max(1, args.count // 5)
+            tally = run_reader(name, count, args.seed, directory)
+            wall = time.perf_counter() - t0
+            results[name] = {"inputs": tally.total, "counts": tally.counts, "failures": tally.failures,
+                             "examples": tally.examples, "wall_s": wall}
+            print(f"{name:>17}: {tally.total:5d} inputs, {tally.counts.get('ok', 0):5d} ok, "
+                  f"{tally.counts.get('rejected', 0):5d} rejected, {tally.failures:4d} failures "
+                  f"({wall:.1f} s)", file=sys.stderr, flush=True)
+            for kind, example in tally.examples.items():
+                print(f"{'':>19}{kind} x{tally.counts[kind]}: {example}", file=sys.stderr, flush=True)
+    if args.json:
+        print(json.dumps(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
