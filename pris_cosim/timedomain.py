@@ -187,6 +187,13 @@ def checked_values(circuit: Circuit, overrides: Mapping[str, Numeric] | None = N
     return values
 
 
+def record_samples(settings: SourceSettings, fs: float, periods: int = 1) -> int:
+    """Samples ``k / fs`` covering ``periods`` PRBS periods (as :func:`pris_cosim.signals.hbridge_waveform`)."""
+    p, q = clock_ratio(settings.fclk, fs)
+    n_bits = int(periods) * (2 ** int(settings.prbs_order) - 1)
+    return int(-(-n_bits * q // p))
+
+
 def clock_ratio(fclk: float, fs: float) -> tuple[int, int]:
     """Integers ``(p, q)`` with ``fclk / fs = p / q`` (nearest fraction with q <= 2**31)."""
     if not (np.isfinite(fclk) and fclk > 0 and np.isfinite(fs) and fs > 0):
@@ -223,10 +230,10 @@ class PrisRecord:
         self.fs = float(fs)
         p, q = clock_ratio(settings.fclk, fs)
         n_total = int(periods) * (2 ** int(settings.prbs_order) - 1)
-        samples = -(-n_total * q // p)  # samples with k / fs < n_total / fclk
+        samples = record_samples(settings, fs, periods)
         if (samples - 1) * p >= 2**63 or n_total * q >= 2**63:
             raise CircuitError("fs / fclk is too irregular for exact integer timing at this length")
-        self.samples = int(samples)
+        self.samples = samples
         self._p, self._q = p, q
         self._unit = 1.0 / (p * float(fs))  # s; bit b spans [b q, (b + 1) q), sample k sits at k p
         self._n_bits = (self.samples - 1) * p // q + 1  # bits active at some sample instant
