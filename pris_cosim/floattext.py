@@ -30,7 +30,7 @@ _EXP_LIMIT = 280  # decimal exponents handled by the array path
 _SPLIT = 134217729.0  # 2**27 + 1, Dekker's splitter
 _FIELD = 24  # sign, digit, '.', 16 digits, 'e', sign, 3 exponent digits
 _ZERO = np.frombuffer(b"0.0", np.uint8)
-_ROWS = 4096  # rows per block
+_ROWS = 16384  # rows per block (larger blocks amortise the per-operation overhead)
 
 
 @lru_cache(maxsize=1)
@@ -123,22 +123,19 @@ def _fill_fast(f: np.ndarray, x: np.ndarray, a: np.ndarray, e: np.ndarray) -> No
     if carry.any():
         m = np.where(carry, 10**16, m)
         e = e + carry
-    # digits, most significant first, as uint32 halves of 9 and 8 digits
-    digits = np.empty((a.size, 17), np.uint8)
+    # digits, least significant first, from uint32 halves of 8 and 9 digits
+    rev = np.empty((a.size, 17), np.uint8)
     hi, lo = np.divmod(m, 10**8)
-    for part, cols in ((lo.astype(np.uint32), range(16, 8, -1)), (hi.astype(np.uint32), range(8, -1, -1))):
+    for part, cols in ((lo.astype(np.uint32), range(0, 8)), (hi.astype(np.uint32), range(8, 17))):
         for j in cols:
             part, dj = np.divmod(part, np.uint32(10))
-            digits[:, j] = dj
-    nonzero = digits[:, :0:-1] != 0
-    last = 16 - np.argmax(nonzero, axis=1)
-    last[~nonzero.any(axis=1)] = 0  # digits after the point
-    digits += ord("0")
-    digits[:, 1:][np.arange(1, 17)[None, :] > last[:, None]] = 0
+            rev[:, j] = dj
+    keep = np.logical_or.accumulate(rev[:, :16] != 0, axis=1)  # not a trailing zero
+    rev += ord("0")
     f[:, 0] = np.signbit(x) * np.uint8(ord("-"))
-    f[:, 1] = digits[:, 0]
-    f[:, 2] = (last > 0) * np.uint8(ord("."))
-    f[:, 3:19] = digits[:, 1:]
+    f[:, 1] = rev[:, 16]
+    f[:, 2] = keep[:, 15] * np.uint8(ord("."))
+    f[:, 3:19] = (rev[:, 15::-1] * keep[:, ::-1]).astype(np.uint8)
     f[:, 19] = ord("e")
     f[:, 20] = np.where(e < 0, ord("-"), ord("+"))
     ae = np.abs(e)
