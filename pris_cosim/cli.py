@@ -17,7 +17,6 @@ import os
 import sys
 import warnings
 from collections.abc import Sequence
-from importlib.metadata import entry_points
 from typing import Any
 
 import numpy as np
@@ -245,7 +244,12 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 # ---------------------------------------------------------------------- main
-def build_parser() -> argparse.ArgumentParser:
+#: Commands of this package; the others come from the ``pris_cosim.commands`` entry points.
+BUILTIN_COMMANDS = ("frf", "models", "reproduce", "simulate", "build-fmu", "lab")
+
+
+def build_parser(plugins: bool = True) -> argparse.ArgumentParser:
+    """The command-line parser; ``plugins=False`` leaves out the entry-point commands (faster start)."""
     parser = OneLineParser(prog="pris-cosim", description="PRIS perturbation, circuits, FMUs and estimation")
     parser.add_argument("--version", action="version", version=f"pris-cosim {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -258,8 +262,11 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_lab import register as register_lab
 
     register_lab(sub)
-    for ep in entry_points(group="pris_cosim.commands"):
-        ep.load()(sub)
+    if plugins:
+        from importlib.metadata import entry_points
+
+        for ep in entry_points(group="pris_cosim.commands"):
+            ep.load()(sub)
     return parser
 
 
@@ -272,7 +279,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     1 for an internal error (one line; ``PRIS_COSIM_TRACEBACK=1`` prints the
     traceback).
     """
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser(plugins=command not in BUILTIN_COMMANDS)  # a built-in command needs no plugin imports
     args = parser.parse_args(argv)
     prefix = f"pris-cosim {args.command}"
     restore = _terminate_as_interrupt()

@@ -1,9 +1,13 @@
 """Command-line commands ``simulate`` and ``build-fmu`` (added by :func:`register`).
 
 ``simulate`` runs the PRIS arrangement (thesis Fig. 2.15) and writes the
-waveform CSV ``time_s,v_bprbs,v_in,i_in[,v_out]``; ``--engine numpy`` is the
-in-process exact engine (:func:`pris_cosim.timedomain.simulate_pris`),
+waveform columns ``time_s,v_bprbs,v_in,i_in[,v_out]`` as ``.csv``, ``.npz``
+or ``.mat`` (by the extension of ``--out``, :mod:`pris_cosim.waveform_io`);
+``--engine numpy`` is the in-process exact engine, computed and written in
+chunks of bounded size (:func:`pris_cosim.timedomain.pris_record`),
 ``--engine fmu`` builds the monolithic FMU and simulates it with fmpy.
+Records that would fill the disk or memory, or run for more than an hour,
+are refused before any work.
 ``build-fmu`` writes the DUT FMU, and with ``--with-source`` also the PRIS
 source FMU and the monolithic source-plus-DUT FMU, each with its ``.mo`` text.
 """
@@ -11,6 +15,7 @@ source FMU and the monolithic source-plus-DUT FMU, each with its ``.mo`` text.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -34,13 +39,14 @@ def _si(text: str) -> float:
 
 def register(sub: Any) -> None:
     """Add the ``simulate`` and ``build-fmu`` sub-commands to an argparse sub-parser set."""
-    p = sub.add_parser("simulate", help="PRIS waveforms of a netlist or model (CSV time_s,v_bprbs,v_in,i_in)")
+    p = sub.add_parser("simulate", help="PRIS waveforms of a netlist or model (time_s,v_bprbs,v_in,i_in as .csv/.npz/.mat)")
     add_circuit_options(p)
     _config_option(p)
     _source_options(p, required=True)
     p.add_argument("--fs", type=_si, required=True, help="sampling frequency, Hz")
     p.add_argument("--periods", type=int, required=True, help="number of PRBS periods")
-    p.add_argument("--out", required=True, metavar="FILE.csv", help="waveform CSV to write")
+    p.add_argument("--out", required=True, metavar="FILE", help="waveform file to write; format by extension: "
+                   ".csv, .npz (NumPy) or .mat (MATLAB v5), the same columns in each")
     p.add_argument("--engine", choices=("numpy", "fmu", "cosim"), default="numpy",
                    help="numpy: exact in-process ZOH engine (default); fmu: monolithic FMU run by fmpy; "
                         "cosim: source FMU and winding FMU coupled exactly by the master")
@@ -117,10 +123,22 @@ def _base_name(args: argparse.Namespace) -> str:
     return Path(args.netlist).stem
 
 
-def cmd_simulate(args: argparse.Namespace) -> int:
-    """``simulate``: write the PRIS waveform CSV; with ``--json`` print samples, engine, wall_s, out."""
-    from .measured import Waveforms, write_waveform_csv
+#: Longest record ``simulate`` accepts, samples (about 43 GB of .npz for four columns).
+MAX_SAMPLES = 2**30
+#: Engine throughput assumed for the up-front time estimate, samples/s (conservative, 2 loaded cores).
+_RATE = {"numpy": {"npz": 4e6, "mat": 4e6, "csv": 4e5}, "fmu": 5e4}
+#: Longest run ``simulate`` starts, s.
+MAX_SECONDS = 3600.0
+#: Bytes held per sample by an engine that returns the whole record in memory (columns, copies, fmpy result).
+_INMEM_BYTES = 160
 
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """``simulate``: write the PRIS waveforms (.csv, .npz or .mat); with ``--json`` print samples, engine, wall_s, out."""
+    from .timedomain import CHUNK_SAMPLES, record_samples
+    from .waveform_io import check_target
+
+    check_target(args.out)
     circuit, model = load_circuit(args)
     port, shorts = _port_and_shorts(circuit, model, args)
     settings = _settings(args)
@@ -136,30 +154,109 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if probe not in circuit.probes:
             circuit = circuit.copy()
             circuit.probes.append(probe)
-    t0 = time.perf_counter()
-    extra: dict[str, Any] = {}
-    if args.engine == "numpy":
-        from .timedomain import simulate_pris
-
-        w = simulate_pris(circuit, port, settings, args.fs, args.periods, shorts)
-    elif args.engine == "cosim":
-        w, extra = _simulate_cosim(circuit, port, settings, shorts, args)
-    else:
-        w, extra = _simulate_fmu(circuit, port, settings, shorts, args)
-    wall = time.perf_counter() - t0
+    columns = ["time_s", "v_bprbs", "v_in", "i_in"] + (["v_out"] if probe else [])
+    samples = record_samples(settings, args.fs, args.periods)
+    _size_guard(args, samples, len(columns))
     comments = [f"pris-cosim simulate, engine {args.engine}: {circuit.title or 'circuit'} driven at {port}"
                 + (f", shorted {', '.join(shorts)}" if shorts else ""),
                 f"vdc={settings.vdc} V, prbs_order={settings.prbs_order}, fclk={settings.fclk} Hz, "
                 f"rpris={settings.rpris} Ohm, lpris={settings.lpris} H, cpris={settings.cpris} F, fs={args.fs} Hz"]
-    v_out = w[f"v_{probe}"] if probe else None
-    write_waveform_csv(args.out, Waveforms(w["time_s"], w["v_bprbs"], w["v_in"], w["i_in"], v_out,
-                                           comments=comments))
-    result = {"samples": int(len(w["time_s"])), "engine": args.engine, "wall_s": wall, "out": str(args.out)} | extra
+    t0 = time.perf_counter()
+    extra: dict[str, Any] = {}
+    if args.engine == "numpy":
+        from .timedomain import pris_record
+
+        from .waveform_io import IN_MEMORY_BYTES
+
+        record = pris_record(circuit, port, settings, args.fs, args.periods, shorts)
+        whole = args.out.lower().endswith((".npz", ".mat")) and samples * 8 * len(columns) <= IN_MEMORY_BYTES
+        pieces: Any = (_columns(w, probe) for w in record.chunks(None if whole else CHUNK_SAMPLES))
+    else:
+        run = _simulate_cosim if args.engine == "cosim" else _simulate_fmu
+        w, extra = run(circuit, port, settings, shorts, args)
+        samples = int(len(w["time_s"]))
+        pieces = [_columns(w, probe)]
+    _write(args.out, columns, pieces, samples, comments, t0)
+    wall = time.perf_counter() - t0
+    result = {"samples": samples, "engine": args.engine, "wall_s": wall, "out": str(args.out)} | extra
     if args.json:
         _emit(result)
     else:
         print(f"wrote {result['samples']} samples to {args.out} ({args.engine} engine, {wall:.3f} s)", file=sys.stderr)
     return 0
+
+
+def _columns(w: dict[str, Any], probe: str | None) -> dict[str, Any]:
+    """The waveform columns of an engine's output (``v_out`` = the probe's voltage)."""
+    out = {k: w[k] for k in ("time_s", "v_bprbs", "v_in", "i_in")}
+    if probe:
+        out["v_out"] = w[f"v_{probe}"]
+    return out
+
+
+def _write(path: str, columns: list[str], pieces: Any, samples: int, comments: list[str], t0: float) -> None:
+    """Write the record, with progress on stderr once it has run for more than two seconds."""
+    from .waveform_io import write_waveforms
+
+    last = [t0]
+
+    def progress(done: int) -> None:
+        now = time.perf_counter()
+        if now - t0 > 2.0 and now - last[0] > 2.0 and done < samples:
+            last[0] = now
+            print(f"simulate: {done / 1e6:.1f} of {samples / 1e6:.1f} M samples ({100 * done / samples:.0f} %), "
+                  f"{now - t0:.0f} s", file=sys.stderr, flush=True)
+
+    write_waveforms(path, columns, pieces, samples, comments, progress)
+
+
+def _size_guard(args: argparse.Namespace, samples: int, columns: int) -> None:
+    """Refuse, before any work, records that would fill the disk or memory or run for hours."""
+    import shutil
+
+    from .waveform_io import bytes_per_sample, waveform_format
+
+    fmt = waveform_format(args.out)
+    what = (f"--periods {args.periods} of PRBS{args.prbs_order} at --fclk {args.fclk:g} Hz sampled at "
+            f"--fs {args.fs:g} Hz give {samples:.3g} samples")
+    fix = "lower --periods, --prbs-order or --fs"
+    size = samples * bytes_per_sample(fmt, columns)
+    if samples > MAX_SAMPLES:
+        raise UsageError(f"{what} (about {_gb(size)} as .{fmt}), over the limit of {MAX_SAMPLES:.3g}; {fix}")
+    directory = Path(args.out).parent
+    free = shutil.disk_usage(directory if str(directory) else ".").free
+    scratch = 2 if fmt != "csv" and samples * 8 * columns > (96 * 2**20) else 1  # spooled columns, then the archive
+    if size * scratch > free:
+        raise UsageError(f"{what}: about {_gb(size * scratch)} to write, {_gb(free)} free in "
+                         f"{os.fspath(directory) or '.'}; {fix}")
+    rate = _RATE["numpy"][fmt] if args.engine == "numpy" else _RATE.get(args.engine, _RATE["fmu"])
+    seconds = samples / rate  # type: ignore[operator]
+    if seconds > MAX_SECONDS:
+        raise UsageError(f"{what}: about {seconds / 3600:.1f} h with --engine {args.engine}; {fix}")
+    if args.engine != "numpy":  # whole record in memory
+        need, avail = samples * _INMEM_BYTES, _available_memory()
+        if avail is not None and need > avail:
+            raise UsageError(f"{what}: about {_gb(need)} of memory with --engine {args.engine}, "
+                             f"{_gb(avail)} available; {fix}")
+
+
+def _gb(n: float) -> str:
+    return f"{n / 1e9:.3g} GB" if n >= 1e8 else f"{n / 1e6:.3g} MB"
+
+
+def _available_memory() -> int | None:
+    """Available memory, bytes (``MemAvailable`` on Linux), or None when unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
 
 
 def _simulate_fmu(circuit: Circuit, port: str, settings: SourceSettings, shorts: tuple[str, ...],

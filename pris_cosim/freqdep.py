@@ -20,7 +20,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import nnls
 
 from .circuit import GROUND, Circuit, Element
 from .errors import CircuitError
@@ -122,6 +121,8 @@ def fit_resistance(
     x = (2 * np.pi * f[:, None] / wk) ** 2
     basis = np.column_stack([np.ones(f.size), x / (1 + x)])
     weight = 1 / np.maximum(target, 1e-30)[:, None]
+    from scipy.optimize import nnls  # imported here: scipy.optimize costs half a second at start-up
+
     coef, _ = nnls(basis * weight, target * weight[:, 0])
     keep = coef[1:] > 1e-12 * max(coef.max(), 1e-300)
     r = coef[1:][keep]
@@ -153,6 +154,8 @@ def fit_inductance(
     x = (2 * np.pi * f[:, None] / wk) ** 2
     basis = np.column_stack([np.ones(f.size), 1 / (1 + x)])
     weight = 1 / target[:, None]
+    from scipy.optimize import nnls  # imported here: scipy.optimize costs half a second at start-up
+
     coef, _ = nnls(basis * weight, target * weight[:, 0])
     keep = coef[1:] > 1e-12 * max(coef.max(), 1e-300)
     l = coef[1:][keep]
@@ -189,6 +192,8 @@ def fit_impedance(
     b = np.concatenate([(target * weight[:, 0]).real, (target * weight[:, 0]).imag])
     col = np.abs(a).max(axis=0)
     col[col == 0] = 1.0
+    from scipy.optimize import nnls  # imported here: scipy.optimize costs half a second at start-up
+
     coef, _ = nnls(a / col, b)
     coef = coef / col
     r = coef[2:]
