@@ -36,20 +36,32 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
           },                                      #   simulated targets: "method" "analytic" or "pris" (Welch H1)
           "approach": "frequency",                # "frequency" (analytic estimate), "frequency-simulated",
                                                   # "time", "emd", "iemd"
-          "responses": ["Zin"],                   # frequency approaches; names of the configuration
-          "frequency": {"fmin": 20, "fmax": 9000, "points": 200},
+          "responses": ["Zin"],                   # frequency approaches (default: all of the configuration)
+          "frequency": {"fmin": 20, "fmax": 9000, "points": 200},   # default band: see estimation.estimate
           "source": {"vdc": 30, "prbs_order": 12, "fclk": 1e4, "rpris": 31800, "lpris": 2.53, "cpris": 1e-8},
           "fs": 300000, "duration": 0.3,          # simulated perturbation: sampling rate (Hz), record (s)
           "cost": "sse",                          # "sse" (4.21), "rmse" (4.29/4.32/4.39/4.45), "correlation"
-          "optimiser": "ga+local",                # any estimation.optimisers.minimize method
-          "options": {},                          # its options
-          "budget": {"max_evals": 20000, "max_time_s": 60},
+          "optimiser": "ga+local",                # stage 1: any estimation.optimisers.minimize method
+          "options": {},                          # its options (default: estimation.estimate.default_plan)
+          "budget": {"max_evals": 20000, "max_time_s": 60, "restarts": 3},
           "seed": 1
         }
 
-    Answer (``--json``): ``estimate``, ``errors_percent`` (for a simulated
-    target with known values), ``cost``, ``engine``, ``per_eval_s``,
-    ``nfev``, ``wall_s``, ``message``.
+    Defaults (``estimation.estimate``): GA + L-BFGS-B sized to the number of
+    parameters, a least-squares polish on the approach's own residuals, 3
+    restarts; the two-section model's thesis ties R2 = R1, C2 = C1 when the
+    config names neither parameters nor ties, the three-section model's
+    Table 4.8 bounds when it names no parameters; mutual inductances searched as
+    their coupling coefficient (|k| < 1 in the parametrisation).
+
+    Answer (``--json``): ``estimate`` (exactly the values that were scored),
+    ``errors_percent`` (for a simulated target with known values), ``cost``,
+    ``engine``, ``per_eval_s``, ``nfev``/``evaluations``, ``wall_s``,
+    ``message``, and the verdict (``estimation.verdict``): ``converged``,
+    ``convergence_reason``, ``uncertainty`` {param: relative 1-sigma},
+    ``non_identifiable``, ``verdict`` (residual RMS, noise floor, tolerance,
+    parameters at a bound, restarts), ``restarts`` (per-restart costs). When
+    not converged, one ``warning:`` line goes to stderr.
 
 Bad input raises :class:`EstimationInputError` (a ``ValueError``): the main
 CLI prints one line and exits with status 2.
@@ -218,7 +230,7 @@ def load_config(path: str | Path) -> dict[str, Any]:
         raise EstimationInputError(f"config {path} is not valid JSON: {exc}") from None
     if not isinstance(cfg, dict):
         raise EstimationInputError(f"config {path} must hold a JSON object")
-    known = {"model", "parameters", "ties", "target", "approach", "responses", "frequency", "source", "fs",
+    known = {"model", "netlist", "port", "parameters", "ties", "target", "approach", "responses", "frequency", "source", "fs",
              "duration", "cost", "optimiser", "options", "budget", "seed", "configuration"}
     unknown = sorted(set(cfg) - known)
     if unknown:
@@ -229,8 +241,14 @@ def load_config(path: str | Path) -> dict[str, Any]:
 def _parameter_set(model: Any, cfg: dict[str, Any]) -> Any:
     from .parameters import ParameterSet
 
+    from .estimate import DEFAULT_BOUNDS, DEFAULT_TIES
+
     spec = _need(cfg, "parameters", dict, {})
     ties = _need(cfg, "ties", dict, {})
+    if not spec and "ties" not in cfg:
+        ties = dict(DEFAULT_TIES.get(model.name, {}))
+    if not spec:
+        spec = {k: {"min": lo, "max": hi} for k, (lo, hi) in DEFAULT_BOUNDS.get(model.name, {}).items()}
     names = list(spec) + [t for t in ties if t not in spec] if spec else None
     bounds = {}
     for k, v in spec.items():
@@ -260,18 +278,22 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True) -> dict[str, Any]:
     from pris_cosim.models import get_model
 
     from . import approaches as ap
-    from .optimisers import Budget, minimize
 
     t0 = time.perf_counter()
     try:
-        model = get_model(_need(cfg, "model", str, "two-section"))
+        if "netlist" in cfg:
+            from .netlist_model import model_from_netlist
+
+            model = model_from_netlist(_need(cfg, "netlist", str, ""), _need(cfg, "port", str, ""))
+        else:
+            model = get_model(_need(cfg, "model", str, "two-section"))
     except Exception as exc:  # CircuitError is a ValueError
         raise EstimationInputError(str(exc)) from None
     conf = model.configuration(_need(cfg, "configuration", str, "default")) if "configuration" in cfg \
         else next(iter(model.configurations.values()))
     params = _parameter_set(model, cfg)
     approach_name = _need(cfg, "approach", str, "frequency")
-    responses = _need(cfg, "responses", list, [r.name for r in conf.responses][:1])
+    responses = _need(cfg, "responses", list, [r.name for r in conf.responses])
     metric = _need(cfg, "cost", str, "sse" if approach_name.startswith("frequency") else "rmse")
     tgt = _need(cfg, "target", dict, {"kind": "simulated"})
     kind = tgt.get("kind", "simulated")
@@ -284,9 +306,13 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True) -> dict[str, Any]:
     fs = float(_need(cfg, "fs", (int, float), 300e3))
     duration = float(_need(cfg, "duration", (int, float), 0.3))
     fr = _need(cfg, "frequency", dict, {})
-    fmin, fmax, points = float(fr.get("fmin", 20.0)), float(fr.get("fmax", 9e3)), int(fr.get("points", 200))
+    from .estimate import default_band
+
+    band = (20.0, 9e3) if "fmin" in fr and "fmax" in fr else default_band(model, conf)
+    fmin, fmax, points = float(fr.get("fmin", band[0])), float(fr.get("fmax", band[1])), int(fr.get("points", 200))
     circuit = model.circuit
     known_target: dict[str, float] | None = None
+    proxy: Any = None
     if kind == "simulated":
         base = circuit.resolve(check=False)
         base.update(circuit.parameter_values())
@@ -333,6 +359,7 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True) -> dict[str, Any]:
         else:
             raise EstimationInputError(f"target kind {kind!r} does not suit approach {approach_name!r}")
     elif approach_name in ("time", "emd", "iemd"):
+        probe_w: dict[str, np.ndarray] = {}
         if kind == "waveforms-csv":
             wf = read_waveform_csv(tgt["path"])
             i_in, v_in = wf.i_in, wf.v_in
@@ -342,34 +369,91 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True) -> dict[str, Any]:
             w = td.simulate_pris(circuit, conf.port, source, fs, periods=periods, overrides=values or None)
             n = min(w["time_s"].size, int(round(fs * duration)))
             i_in, v_in = w["i_in"][:n], w["v_in"][:n]
+            probe_w = {k: v[:n] for k, v in w.items() if k.startswith("v_") and k not in ("v_in", "v_bprbs")}
         else:
             raise EstimationInputError(f"target kind {kind!r} does not suit approach {approach_name!r}")
-        eng = ap.InjectionEngine(circuit, conf.port, i_in, fs)
-        cls = {"time": ap.TimeDomain, "emd": ap.EMDApproach, "iemd": ap.IEMDApproach}[approach_name]
-        approach = cls(params, eng, v_in, "rmse" if metric in ("rmse", "nrmse", "sse") else "correlation")
+        approach, proxy = _time_approach(approach_name, params, model, conf, source, fs, i_in, v_in, kind,
+                                         metric, fmin, fmax, probe_w)
     else:
         raise EstimationInputError(f"approach must be frequency, frequency-simulated, time, emd or iemd (got {approach_name!r})")
-    b = _need(cfg, "budget", dict, {"max_evals": 20000})
+    return _fit_and_report(cfg, approach, params, model, approach_name, metric, known_target, t0, progress,
+                           proxy)
+
+
+def _time_approach(name: str, params: Any, model: Any, conf: Any, source: Any, fs: float, i_in: np.ndarray,
+                   v_in: np.ndarray, kind: str, metric: str, fmin: float, fmax: float,
+                   probes: dict[str, np.ndarray]) -> tuple[Any, Any]:
+    """Time/EMD/IEMD approach and its stage-1 stand-in (:func:`estimation.estimate.waveform_proxy`).
+
+    A simulated target is compared with the estimate driven by the same commanded bridge voltage
+    through the source's series RLC (exact: the true parameters score zero); a measured record
+    with its sampled current injected at the port (thesis 4.2.3).
+    """
+    from . import approaches as ap
+    from . import estimate as es
+
+    m = "rmse" if metric in ("rmse", "nrmse", "sse") else "correlation"
+    if kind == "simulated":
+        eng: Any = ap.PrisEngine(model.circuit, conf.port, source, fs, int(np.size(v_in)),
+                                 probes=[k[2:] for k in probes])
+        cls: Any = {"time": es.RecordTime, "emd": es.RecordEMD, "iemd": es.RecordIEMD}[name]
+        approach = cls(params, eng, v_in, m, chunk=16)
+        approach.probe_targets = dict(probes)
+    else:
+        eng = ap.InjectionEngine(model.circuit, conf.port, i_in, fs)
+        cls = {"time": ap.TimeDomain, "emd": ap.EMDApproach, "iemd": ap.IEMDApproach}[name]
+        approach = cls(params, eng, v_in, m)
+    return approach, es.waveform_proxy(params, model.response_set([conf.name]), i_in, v_in, fs, fmin, fmax,
+                                       configuration=conf, probes=probes)
+
+
+def _fit_and_report(cfg: dict[str, Any], approach: Any, params: Any, model: Any, approach_name: str, metric: str,
+                    known_target: dict[str, float] | None, t0: float, progress: bool, proxy: Any = None
+                    ) -> dict[str, Any]:
+    """Run the recipe of :mod:`estimation.estimate` and build the answer (estimate = the scored model)."""
+    from .estimate import default_plan, frequency_data, run_plan
+    from .optimisers import Budget
+
+    b = _need(cfg, "budget", dict, {})
+    plan = default_plan(approach.n)
+    if "optimiser" in cfg:
+        plan["method"] = _need(cfg, "optimiser", str)
+        plan["options"] = _need(cfg, "options", dict, {})
+    elif "options" in cfg:
+        plan["options"] = _need(cfg, "options", dict, {})
+    if b.get("max_evals") is not None:
+        plan["budget"] = Budget(max_evals=max(1, int(b["max_evals"]) // int(plan["restarts"])))
+    if "restarts" in b:
+        plan["restarts"] = int(b["restarts"])
+    data = frequency_data(approach) if hasattr(approach, "target") else np.asarray(approach.v_target, float)
     try:
-        budget = Budget(max_evals=b.get("max_evals"), max_time_s=b.get("max_time_s"))
-        res = minimize(approach.cost_batch, approach.n, method=_need(cfg, "optimiser", str, "ga+local"),
-                       seed=int(_need(cfg, "seed", int, 1)), budget=budget, options=_need(cfg, "options", dict, {}))
+        outcome = run_plan(approach, params, data, seed=int(_need(cfg, "seed", int, 1)), plan=plan, proxy=proxy,
+                           time_limit_s=b.get("max_time_s"), progress=progress,
+                           noise=0.0 if known_target is not None else None)  # a simulated target is exact
     except ValueError as exc:
         raise EstimationInputError(str(exc)) from None
-    vals = params.values(res.x)
-    est = {k: float(vals[k]) for k in params.varying}
+    ev = params.evaluate(outcome.x)
+    est = {k: float(ev.values[k]) for k in params.varying}
+    v = outcome.verdict
     out = {"model": model.name, "approach": approach_name, "engine": approach.engine, "cost_function": metric,
-           "estimate": est, "cost": float(res.fun), "nfev": int(res.nfev), "per_eval_s": approach.stats.per_eval_s,
-           "message": res.message, "wall_s": time.perf_counter() - t0}
+           "estimate": est, "cost": float(outcome.cost), "nfev": int(outcome.nfev), "evaluations": int(outcome.nfev),
+           "per_eval_s": approach.stats.per_eval_s, "message": outcome.message,
+           "converged": v["converged"], "convergence_reason": v["convergence_reason"],
+           "uncertainty": v["uncertainty"], "non_identifiable": v["non_identifiable"],
+           "verdict": {k: v[k] for k in ("residual_rms", "noise_floor", "tolerance", "at_bound", "restarts",
+                                         "condition")},
+           "restarts": outcome.stages, "wall_s": time.perf_counter() - t0}
     if known_target is not None:
         out["target"] = known_target
         out["errors_percent"] = {k: (est[k] - known_target[k]) / known_target[k] * 100 for k in est
                                  if known_target[k] != 0}
+    if not v["converged"]:
+        print(f"warning: estimate not converged: {v['convergence_reason']}", file=sys.stderr, flush=True)
     return out
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
-    out = run_estimate(load_config(args.config))
+    out = run_estimate(load_config(args.config), progress=not getattr(args, "quiet", False))
     if args.json:
         emit(out)
     else:

@@ -100,8 +100,12 @@ class Parameter:
     description : str
         Free text.
     kind : str
-        ``"R"``, ``"L"``, ``"C"``, ``"K"`` (coupling coefficient) or ``""``.
-        Coupling parameters are the ones a passivity repair shrinks.
+        ``"R"``, ``"L"``, ``"C"``, ``"K"`` (coupling coefficient), ``"M"``
+        (mutual inductance ``M`` of a coupling element ``k = M g(L...)``: its
+        ``min``/``max`` and unit-cube coordinate are those of the coupling
+        ``k``, so every point of the cube has ``|k| < 1``; ``value`` is ``M``
+        in H) or ``""``. Coupling parameters are the ones a passivity repair
+        shrinks.
 
     Raises
     ------
@@ -144,7 +148,7 @@ class Parameter:
                 self._fail(f"log scale needs min > 0 (got min {_fmt(self.min)})")
         if not math.isfinite(self.value):
             self._fail(f"value is not finite ({self.value!r})")
-        if self.vary and not (self.min <= self.value <= self.max):
+        if self.vary and self.kind != "M" and not (self.min <= self.value <= self.max):
             self._fail(f"value {_fmt(self.value)} outside [{_fmt(self.min)}, {_fmt(self.max)}]")
 
     def _fail(self, message: str) -> None:
@@ -320,6 +324,7 @@ class ParameterSet:
         self.passivity = passivity
         self.eps = float(eps)
         self._order: list[str] | None = None
+        self._mutuals: list[str] | None = None
         for p in parameters:
             self.add(p)
 
@@ -330,12 +335,14 @@ class ParameterSet:
             raise ValueError(f"Parameter {parameter.name!r}: defined twice")
         self._params[parameter.key] = parameter
         self._order = None
+        self._mutuals = None
 
     def set(self, name: str, **changes: Any) -> Parameter:
         """Replace fields of one parameter (validated again); returns the new parameter."""
         new = replace(self[name], **changes)
         self._params[new.key] = new
         self._order = None
+        self._mutuals = None
         return new
 
     def __getitem__(self, name: str) -> Parameter:
@@ -439,7 +446,14 @@ class ParameterSet:
             value = float(current[key])
             params.append(_default_parameter(name, value, kind, bound_map.get(key), factor,
                                              vary=key not in fixed_keys, expr=tie_map.get(key)))
-        return cls(params, circuit=circuit, passivity=passivity, eps=eps)
+        out = cls(params, circuit=circuit, passivity=passivity, eps=eps)
+        for name in out.mutuals():  # searched as its coupling coefficient unless bounds in H were given
+            p = out[name]
+            if p.key not in bound_map and p.kind != "K":
+                k0 = float(p.value * out._mutual_gain(p.key, {q.key: q.value for q in out if q.expr is None}))
+                lo, hi = (0.0, K_MAX) if 0 <= k0 <= K_MAX else (-K_MAX, K_MAX)
+                out.set(name, kind="M", min=lo, max=hi, scale="linear", theta_scale=1e-2)
+        return out
 
     @classmethod
     def from_model(cls, model: Any, **kwargs: Any) -> "ParameterSet":
@@ -508,12 +522,19 @@ class ParameterSet:
         """
         lower = {k.lower(): v for k, v in values.items()}
         cols = []
+        env = None
         for p in self:
             if not p.varying:
                 continue
             if p.key not in lower:
                 raise ValueError(f"Parameter {p.name!r}: missing from the values")
-            cols.append(p.to_unit(lower[p.key]))
+            if p.kind == "M":
+                if env is None:
+                    env = {q.key: np.asarray(lower.get(q.key, q.value), float) for q in self if q.expr is None}
+                    self._evaluate_ties(env)
+                cols.append(p.to_unit(np.asarray(lower[p.key], float) * self._mutual_gain(p.key, env)))
+            else:
+                cols.append(p.to_unit(lower[p.key]))
         if not cols:
             return np.zeros(0)
         return np.stack(np.broadcast_arrays(*cols), axis=-1)
@@ -566,12 +587,19 @@ class ParameterSet:
         """Lower-case name to ``(P,)`` values; ``u2=None`` takes every ``Parameter.value``."""
         env: dict[str, np.ndarray] = {}
         col = 0
+        coupling: dict[str, np.ndarray] = {}
         for p in self:
             if p.varying and u2 is not None:
-                env[p.key] = p.from_unit(u2[:, col])
+                if p.kind == "M":
+                    coupling[p.key] = p.from_unit(u2[:, col])
+                    env[p.key] = np.full(P, p.value)
+                else:
+                    env[p.key] = p.from_unit(u2[:, col])
                 col += 1
             elif p.expr is None:
                 env[p.key] = np.full(P, p.value)
+        for key, k in coupling.items():
+            env[key] = k / self._mutual_gain(key, env)
         self._evaluate_ties(env)
         return {k: np.broadcast_to(v, (P,)).astype(float) for k, v in env.items()}
 
@@ -654,10 +682,59 @@ class ParameterSet:
             min_eigenvalue=lam,
         )
 
-    def _shrink(self, env: dict[str, np.ndarray], elements: Mapping[str, Numeric], factor: np.ndarray) -> dict[str, np.ndarray]:
-        """Scale coupling parameters in ``env`` and return every K element's repaired value."""
+    def _mutual_gain(self, key: str, env: Mapping[str, Any]) -> np.ndarray:
+        """``g`` of the coupling element ``k = M g`` that uses mutual inductance ``key``, from ``env``."""
+        assert self.circuit is not None
+        element = next(e for e in self.circuit.elements
+                       if e.kind == "K" and isinstance(e.value, Expression) and key in e.value.names)
+        full = {k.lower(): v for k, v in self.circuit.parameter_values().items()}
+        full.update(env)
+        full[key] = 1.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.asarray(element.value.evaluate(full), float)
+
+    def mutuals(self) -> list[str]:
+        """Varying parameters that are mutual inductances: a K element's value is proportional to them.
+
+        A parameter ``M`` counts when exactly one coupling element's value is an
+        expression ``k(M, ...)`` with ``k(2 M) = 2 k(M)`` (e.g. ``{M12/sqrt(L1*L2)}``)
+        and no other element uses it. Shrinking that coupling by a factor is then
+        the same as shrinking ``M`` by it, so a passivity repair can be written
+        back into the parameter: the reported value is the one that was scored.
+        """
+        if self.circuit is None:
+            return []
+        if self._mutuals is not None:
+            return list(self._mutuals)
+        out = []
         for p in self:
-            if p.kind == "K":
+            if p.kind == "M" and p.varying:
+                out.append(p.name)
+                continue
+            if not p.varying or p.kind == "K":
+                continue
+            users = [e for e in self.circuit.elements if isinstance(e.value, Expression) and p.key in e.value.names]
+            if len(users) != 1 or users[0].kind != "K":
+                continue
+            env = {**{k.lower(): v for k, v in self.circuit.parameter_values().items()},
+                   **{q.key: q.value for q in self if q.expr is None}}
+            try:
+                k1 = float(users[0].value.evaluate(env))
+                env2 = dict(env)
+                env2[p.key] = 2.0 * env[p.key]
+                k2 = float(users[0].value.evaluate(env2))
+            except Exception:  # an expression that needs other names: not a plain mutual inductance
+                continue
+            if k1 != 0 and math.isclose(k2, 2.0 * k1, rel_tol=1e-12):
+                out.append(p.name)
+        self._mutuals = out
+        return list(out)
+
+    def _shrink(self, env: dict[str, np.ndarray], elements: Mapping[str, Numeric], factor: np.ndarray) -> dict[str, np.ndarray]:
+        """Scale coupling parameters (and mutual inductances) in ``env``; every K element's repaired value."""
+        mutual = {n.lower() for n in self.mutuals()}
+        for p in self:
+            if p.kind == "K" or p.key in mutual:
                 env[p.key] = env[p.key] * factor
         return {k.name: np.asarray(elements[k.key], float) * factor for k in self.circuit.of_kind("K")}  # type: ignore[union-attr]
 

@@ -166,11 +166,16 @@ class Circuit:
         kind = name[:1].upper()
         if kind not in ELEMENT_UNITS:
             raise CircuitError(f"element {name!r}: unknown element type {kind!r}")
-        if any(e.key == name.lower() for e in self.elements):
+        keys = self.__dict__.get("_element_keys")  # names seen, kept while the list only grows here
+        if keys is None or keys[0] is not self.elements or keys[1] != len(self.elements):
+            keys = (self.elements, len(self.elements), {e.key for e in self.elements})
+        if name.lower() in keys[2]:
             raise CircuitError(f"element {name!r} is defined twice")
         nodes = (n1, n2) if kind == "K" else (node_name(n1), node_name(n2))
         element = Element(name, nodes, _as_value(value, f"element {name!r}"), source_spec)
         self.elements.append(element)
+        keys[2].add(element.key)
+        self.__dict__["_element_keys"] = (self.elements, len(self.elements), keys[2])
         return element
 
     # ------------------------------------------------------------------ queries
@@ -344,8 +349,13 @@ class Circuit:
         L = self.inductance_matrix(values)
         if L.shape[-1] == 0:
             return np.inf
-        lam = np.linalg.eigvalsh(L)[..., 0]
-        return float(lam) if lam.ndim == 0 else lam
+        index = {e.key: i for i, e in enumerate(self.inductors())}
+        coupled = sorted({index[n.lower()] for k in self.of_kind("K") for n in k.nodes if n.lower() in index})
+        alone = np.setdiff1d(np.arange(L.shape[-1]), coupled)  # uncoupled inductors: their own values
+        lam = np.min(np.diagonal(L, axis1=-2, axis2=-1)[..., alone], axis=-1, initial=np.inf)
+        if coupled:
+            lam = np.minimum(lam, np.linalg.eigvalsh(L[..., coupled, :][..., coupled])[..., 0])
+        return float(lam) if np.ndim(lam) == 0 else lam
 
     def check_passive(self, values: Mapping[str, Numeric], strict: bool) -> None:
         """Check that the inductance matrix is positive definite.
@@ -398,11 +408,11 @@ class Circuit:
             pairs[pair] = k.name
         groups = _UnionFind()
         for e in self.elements:
-            if e.kind != "K":
+            if e.kind not in ("K", "I"):  # a current source is an open circuit for the network's equations
                 groups.union(*e.nodes)
         for n in self.nodes:
             if groups.find(n) != groups.find(GROUND):
-                raise CircuitError(f"node {n!r} is floating: no element path to ground")
+                raise CircuitError(f"node {n!r} is floating: no element path to ground (current sources do not count)")
         loops = _UnionFind()
         for e in self.of_kind("C"):
             loops.union(*e.nodes)

@@ -93,6 +93,9 @@ def load_circuit(args: argparse.Namespace) -> tuple[Circuit, Model | None]:
 
     if args.netlist:
         circuit, model = read_netlist(args.netlist), None
+        from .cli_checks import check_circuit_size
+
+        check_circuit_size(circuit, getattr(args, "command", ""))
     else:
         model = get_model(args.model)
         circuit = model.circuit
@@ -155,6 +158,9 @@ def cmd_frf(args: argparse.Namespace) -> int:
     f = logspace_hz(args.fmin, args.fmax, args.points)
     values = circuit.resolve()
     lam = circuit.smallest_inductance_eigenvalue(values)
+    from .conditioning import check_response_set
+
+    check_response_set(rs, f)  # one line naming the element when double precision cannot resolve the values
     responses = rs.evaluate(f, method=args.method)
     if args.plot:
         from .plotting import plot_responses

@@ -24,6 +24,15 @@ MAX_RECORD_SAMPLES = 2e8
 MAX_PERIODS = 100_000
 #: Most local worker processes.
 MAX_WORKERS = 256
+#: Largest PRIS source resistance, Ohm: above it the source's conductance is lost against the
+#: winding's in the exact state-space reduction (the network looks open).
+MAX_SOURCE_RESISTANCE = 1e11
+#: Most frequency points of one request (``--points``).
+MAX_POINTS = 1_000_000
+#: Most bytes the dense state-space form of a circuit may take (time-domain engines, FMUs, fits).
+MAX_DENSE_BYTES = 2 * 2**30
+#: Most optimisation runs one study may schedule.
+MAX_STUDY_RUNS = 20_000
 #: Frequency options accepted, Hz.
 FREQUENCY_RANGE = (1e-6, 1e12)
 #: Sampling rate accepted, Hz.
@@ -149,6 +158,10 @@ def check_options(args: argparse.Namespace) -> None:
     if given("out"):
         if command in _OUT_FILE_COMMANDS:
             _output_file("--out", v["out"], parent_must_exist=command == "lab")
+            suffix = Path(v["out"]).suffix.lower()
+            if command == "simulate" and suffix not in (".csv", ".npz", ".mat"):
+                raise OptionError(f"--out {v['out'][:200]}: unknown waveform format {suffix or '(no extension)'!r}; "
+                                  "use .csv, .npz or .mat")
         else:
             _output_dir("--out", v["out"])
     if given("plot"):
@@ -173,6 +186,21 @@ def check_options(args: argparse.Namespace) -> None:
         raise OptionError(f"--fmin ({v['fmin']:g} Hz) must be below --fmax ({v['fmax']:g} Hz)")
     if given("points") and v["points"] < 1:
         raise OptionError(f"--points must be at least 1 (got {v['points']})")
+    if given("points") and v["points"] > MAX_POINTS:
+        n = float(min(v["points"], 10**300))
+        raise OptionError(
+            f"--points {str(v['points'])[:40]} asks for {n:.3g} frequencies (about {n * 16 / 2**30:.3g} GiB in memory and "
+            f"{n * 50 / 2**30:.3g} GiB of output per response); at most {MAX_POINTS:g}: lower --points")
+    for dest in ("cases", "configs", "optimisers"):
+        if given(dest) and isinstance(v[dest], str) and not any(x.strip() for x in v[dest].split(",")):
+            raise OptionError(f"{_flag(dest)}: empty list {v[dest]!r}; name at least one item or leave the option out")
+    for dest, role in (("port", "the driven node"), ("probe", "the probed node")):
+        if given(dest) and isinstance(v[dest], str) and v[dest].strip().lower() in ("0", "gnd"):
+            raise OptionError(f"--{dest} {v[dest]!r} is ground; {role} must be another node")
+    if command == "study":
+        _study_budget(v)
+    if command == "estimate" and given("config"):
+        _estimate_budget(v["config"])
     if command == "diagnose" and given("port") and not given("netlist"):
         raise OptionError("--port applies to a --netlist baseline only")
     _source_checks(v, given)
@@ -186,10 +214,18 @@ def _source_checks(v: dict[str, Any], given: Any) -> None:
 
     for dest, kind in (("rpris", "R"), ("lpris", "L"), ("cpris", "C"), ("rload", "R")):
         if given(dest):
-            _finite(dest, v[dest], *ELEMENT_RANGES[kind], unit={"R": " Ohm", "L": " H", "C": " F"}[kind])
-    for dest in ("rsnub", "csnub", "lsw", "csw"):
+            low, high = ELEMENT_RANGES[kind]
+            if dest == "rpris":
+                high = MAX_SOURCE_RESISTANCE
+            _finite(dest, v[dest], low, high, unit={"R": " Ohm", "L": " H", "C": " F"}[kind])
+    for dest, high, unit in (("rsnub", MAX_SOURCE_RESISTANCE, " Ohm"), ("csnub", ELEMENT_RANGES["C"][1], " F"),
+                             ("lsw", ELEMENT_RANGES["L"][1], " H"), ("csw", ELEMENT_RANGES["C"][1], " F")):
         if given(dest):
             _finite(dest, v[dest], nonnegative=True)
+            _finite(dest, v[dest], 0.0, high, unit=unit)
+    if given("lsw") and v["lsw"] > 0 and not (v.get("csw") or 0) > 0 and not (v.get("csnub") or 0) > 0:
+        raise OptionError("--lsw needs --csw (or a snubber, --rsnub and --csnub): the node between the switch "
+                          "inductance and the series RLC would carry inductors only")
     if given("vdc"):
         _finite("vdc", v["vdc"], positive=True)
         _finite("vdc", v["vdc"], 0.0, 1e9, unit=" V")
@@ -219,3 +255,91 @@ def _source_checks(v: dict[str, Any], given: Any) -> None:
                 f"--periods {v['periods']} of {period:.3g} samples make {total:.3g} samples "
                 f"({total * 8 / 2**30:.3g} GiB per waveform); at most {MAX_RECORD_SAMPLES:g}: lower --periods, "
                 f"--prbs-order or --fs")
+
+
+def _study_budget(v: dict[str, Any]) -> None:
+    """Runs a study would schedule: three-section cells x optimisers x seeds x noise levels."""
+    seeds = v.get("seeds")
+    if seeds is None:
+        return
+    if not isinstance(seeds, int) or seeds < 1:
+        raise OptionError(f"--seeds must be at least 1 (got {seeds})")
+    optimisers = len([x for x in str(v.get("optimisers") or "ga,pso,cma").split(",") if x.strip()]) or 3
+    levels = 1 + len([x for x in str(v.get("snr_db") or "").split(",") if x.strip()])
+    cells = 8  # three-section: 4 approaches x 2 cost functions
+    runs = cells * optimisers * levels * seeds
+    if runs > MAX_STUDY_RUNS:
+        raise OptionError(
+            f"--seeds {seeds} makes {runs} optimisation runs ({cells} cells x {optimisers} optimisers x {levels} "
+            f"noise levels x {seeds} seeds, hours to days of computing); at most {MAX_STUDY_RUNS}: lower --seeds, "
+            "--optimisers or --snr-db")
+
+
+def _estimate_budget(path: str) -> None:
+    """Record length, frequency points and evaluation budget of an ``estimate`` configuration."""
+    import json
+
+    try:
+        if os.path.getsize(path) > 10 * 2**20:
+            raise OptionError(f"--config: {path} is larger than 10 MiB; a configuration is a small JSON object")
+        with open(path, encoding="utf-8") as fh:
+            cfg = json.load(fh)
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        return  # the command reports unreadable or malformed files itself, with the line and column
+    if not isinstance(cfg, dict):
+        return
+
+    def number(x: Any) -> float | None:
+        return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) else None
+
+    fs, duration = number(cfg.get("fs")), number(cfg.get("duration"))
+    if fs is not None and duration is not None and fs * duration > MAX_RECORD_SAMPLES:
+        n = fs * duration
+        raise OptionError(f"--config {path}: fs x duration makes {n:.3g} samples ({n * 8 / 2**30:.3g} GiB per "
+                          f"waveform); at most {MAX_RECORD_SAMPLES:g}: lower 'fs' or 'duration'")
+    freq = cfg.get("frequency")
+    points = number(freq.get("points")) if isinstance(freq, dict) else None
+    if points is not None and points > MAX_POINTS:
+        raise OptionError(f"--config {path}: frequency.points {points:.3g} (about {points * 16 / 2**30:.3g} GiB "
+                          f"per response); at most {MAX_POINTS:g}: lower 'points'")
+    budget = cfg.get("budget")
+    if isinstance(budget, dict):
+        evals, seconds = number(budget.get("max_evals")), number(budget.get("max_time_s"))
+        if seconds is not None and seconds > 7 * 86400:
+            raise OptionError(f"--config {path}: budget.max_time_s {seconds:.3g} s is over a week; "
+                              "at most 604800: lower 'max_time_s'")
+        if evals is not None and evals > 1e9 and seconds is None:
+            raise OptionError(f"--config {path}: budget.max_evals {evals:.3g} without max_time_s runs for days "
+                              "(about 1 ms per evaluation); at most 1e9: lower 'max_evals' or set 'max_time_s'")
+
+
+def check_circuit_size(circuit: Any, command: str) -> None:
+    """Refuse a circuit too large for the dense state-space form a command builds.
+
+    ``frf`` solves large circuits sparsely and is not limited here; the
+    time-domain engines, FMUs and fits hold dense ``nodes x nodes`` stamps
+    per element.
+
+    Parameters
+    ----------
+    circuit : Circuit
+        The circuit read from ``--netlist`` or ``--model``.
+    command : str
+        The command about to run.
+
+    Raises
+    ------
+    OptionError
+        One line with the estimate and the cap.
+    """
+    if command == "frf":
+        return
+    n_nodes = len(circuit.nodes)
+    n_el = len(circuit.of_kind("R", "C"))
+    n = n_nodes + len(circuit.of_kind("L")) + len(circuit.of_kind("V"))
+    need = (n_el * n_nodes**2 + 12 * n**2) * 8.0
+    if need > MAX_DENSE_BYTES:
+        raise OptionError(
+            f"--netlist: {n_nodes} nodes and {n_el} R/C elements need about {need / 2**30:.3g} GiB for the dense "
+            f"state-space form {command} uses; at most {MAX_DENSE_BYTES / 2**30:g} GiB: use a smaller netlist "
+            "(frf solves large netlists sparsely)")

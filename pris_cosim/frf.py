@@ -21,6 +21,7 @@ import numpy as np
 from .circuit import Circuit, Numeric
 from .errors import CircuitError
 from .mna import MNA, StateSpace
+from .sparse_ac import SparseMNA, use_sparse
 
 
 @dataclass(frozen=True)
@@ -133,7 +134,7 @@ class ResponseModel:
                 n = self.circuit.require_node(n, f"node of response {r.name!r}")
                 if n != "0" and n not in nodes:
                     nodes.append(n)
-        self.mna = MNA(self.circuit, current_inputs=[self.port])
+        self.mna = (SparseMNA if use_sparse(self.circuit) else MNA)(self.circuit, current_inputs=[self.port])
         self._out_nodes = nodes
         self._out_index = [self.mna.nodes.index(n) for n in nodes]
 

@@ -1677,7 +1677,11 @@ def read_touchstone_z(path: PathLike, name: str = "Zin") -> MeasuredResponses:
             vals[r, k] = _parse_number(path, t, ln, pos, None)
     line_no = [r[0] for r in records]
     _check_count(path, vals.shape[0], line_no[-1] if line_no else 1, "frequency points")
-    f = vals[:, 0] * _UNIT_SCALE[unit]
+    with np.errstate(over="ignore"):  # an overflow gives inf, refused below with the line
+        f = vals[:, 0] * _UNIT_SCALE[unit]
+    if not np.all(np.isfinite(f)):
+        r = int(np.argmax(~np.isfinite(f)))
+        raise MeasuredDataError(path, f"frequency {_r(vals[r, 0])} {unit} overflows in Hz", line_no[r], 1, "frequency")
     _check_rows_frequency(path, f, line_no, 1, "frequency")
     a, b = vals[:, 1::2], vals[:, 2::2]
     if fmt == "ri":
@@ -1691,6 +1695,11 @@ def read_touchstone_z(path: PathLike, name: str = "Zin") -> MeasuredResponses:
                 raise MeasuredDataError(path, f"negative magnitude {_r(a[r, c])}", ln, pos)
             mag = a
         else:
+            bad = np.argwhere(np.abs(a) > 6000.0)  # 10**(6000/20) = 1e300: beyond double precision
+            if bad.size:
+                r, c = bad[0]
+                ln, pos, _ = records[r][1][1 + 2 * c]
+                raise MeasuredDataError(path, f"magnitude {_r(a[r, c])} dB is outside -6000 .. 6000 dB", ln, pos)
             mag = 10.0 ** (a / 20.0)
         v = _polar(mag, b)
     nf = f.size

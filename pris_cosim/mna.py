@@ -146,7 +146,7 @@ class MNA:
         self.Q1 = np.array(q1_cols).T.reshape(N, len(q1_cols))
         self.Q0 = np.array(q0_cols).T.reshape(N, len(q0_cols))
         self.dynamic_labels = labels
-        if self.vsources and np.abs(self.AV.T @ self.Q1).max() > 0:
+        if self.vsources and self.Q1.shape[1] and np.abs(self.AV.T @ self.Q1).max() > 0:
             bad = self.vsources[int(np.argmax(np.abs(self.AV.T @ self.Q1).max(axis=1)))]
             raise CircuitError(
                 f"element {bad.name!r}: voltage source connects directly to a capacitor; "

@@ -1,4 +1,7 @@
-"""Diagnosis finds the effect hidden in generated data, names skin effect in real data, and refuses bad input."""
+"""Diagnosis names skin effect in real data, reports and realises it, and refuses bad input.
+
+Hidden-effect cases from the independent generator are in ``test_diagnosis_hidden.py``.
+"""
 
 import json
 import subprocess
@@ -9,34 +12,14 @@ import pytest
 
 from estimation.diagnosis import DiagnosisError, diagnose_frequency
 from estimation.diagnosis.report import write_report
-from estimation.diagnosis.synthetic import FREQUENCY_CAUSES, one_port_case, two_winding_case
 from pris_cosim.measured import read_multisegment_csv
 from pris_cosim.models import get_model
 from pris_cosim.netlist import parse_netlist
 
 from conftest import SHARED
+from hidden_cases import one_port_case
 
 REAL = SHARED / "data" / "real" / "small_transformer_3_loads.csv"
-DRAW = np.random.default_rng(20261121)  # hidden effects drawn at random, reproducibly
-
-
-@pytest.mark.parametrize("cause", FREQUENCY_CAUSES)
-def test_one_port_hidden_effect_is_named(cause):
-    seed = int(DRAW.integers(1, 10_000))
-    case = one_port_case(cause, seed)
-    d = diagnose_frequency(case.frequency_hz, case.measured, model=case.baseline, progress=False)
-    assert d.cause == cause, (seed, d.candidates())
-    if cause != "none":
-        assert d.gain >= 0.5
-
-
-def test_two_winding_hidden_skin_effect():
-    case = two_winding_case("skin-effect", 3, points=80)
-    d = diagnose_frequency(case.frequency_hz, case.measured, model=case.baseline, progress=False)
-    assert d.cause == "skin-effect" and d.gain >= 0.5
-    assert set(d.evidence["gain_per_response"]) == {"Zlvoc", "Zlvsc", "Zhvoc", "Zhvsc", "Rlvhv", "Rhvlv"}
-
-
 @pytest.fixture(scope="module")
 def real_short():
     if not REAL.exists():
@@ -48,7 +31,10 @@ def test_real_short_circuit_is_skin_effect(real_short, tmp_path):
     d = diagnose_frequency(real_short.frequency_hz, real_short.responses, progress=False)
     assert d.cause == "skin-effect" and d.gain >= 0.5
     # the fitted resistance rises with frequency, as the measured real part does (about tenfold 10 kHz - 350 kHz)
-    assert d.best.extra["a"] > 1
+    skin = d.best.extra["skin-effect"] if len(d.causes) > 1 else d.best.extra
+    assert skin["a"] > 1
+    # the phase droop above about 5 MHz: named (fixture capacitance) or reported with its band
+    assert "stray-capacitance" in d.causes or any(u["band_hz"][1] > 5e6 for u in d.unexplained)
     assert d.realisation["kind"] == "ladder" and d.realisation["max_deviation_db"] < 0.1
     report = write_report(d, tmp_path / "rep", source="short")
     text = report.read_text()
@@ -78,15 +64,23 @@ def test_responses_not_matching_model():
 def test_too_few_points():
     case = one_port_case("none", 1, points=4)
     with pytest.raises(DiagnosisError, match="too few points"):
-        diagnose_frequency(case.frequency_hz, case.measured, model=case.baseline, progress=False)
+        diagnose_frequency(case.frequency_hz, case.measured, circuit=parse_netlist(case.baseline_netlist), port=case.port,
+                           progress=False)
 
 
 def test_baseline_that_does_not_fit_at_all():
     f = np.logspace(3, 6, 100)
-    capacitor = 1 / (2j * np.pi * f * 1e-9) * (1 + 0j)
-    inductor = parse_netlist("* R-L\nR1 in x 1\nL1 x 0 1m\n")
+    active = -100.0 * np.ones(f.size, complex)  # a negative resistance: no passive R-L-C fits it
+    winding = parse_netlist("* R-L-C\nR1 in x 1\nL1 x 0 1m\nC1 in 0 10p\n")
     with pytest.raises(DiagnosisError, match="does not fit the data at all"):
-        diagnose_frequency(f, {"Zin": capacitor}, circuit=inductor, port="in", progress=False)
+        diagnose_frequency(f, {"Zin": active}, circuit=winding, port="in", progress=False)
+
+
+def test_improper_baseline_is_refused():
+    f = np.logspace(3, 6, 100)
+    inductor = parse_netlist("* R-L\nR1 in x 1\nL1 x 0 1m\n")
+    with pytest.raises(DiagnosisError, match="improper"):
+        diagnose_frequency(f, {"Zin": 1j * f}, circuit=inductor, port="in", progress=False)
 
 
 def test_cli_bad_input_one_line(tmp_path):

@@ -111,8 +111,6 @@ def test_fuzzed_measured_files(tmp_path, reader):
         ext, data = fc.FILE_READERS[reader](random.Random(seed))
         path = _path(tmp_path, f"{reader}{seed}{ext}", data)
         verdict = fc.check_measured(path)
-        if reader == "touchstone" and verdict == "warning":
-            pytest.xfail("Touchstone reading moves to scikit-rf; its numerical warnings are fixed there")
         assert verdict in ("ok", "rejected"), (reader, data[:300])
 
     check()
@@ -129,8 +127,6 @@ def test_fuzzed_mat_files(tmp_path, seed):
                          ids=lambda p: p.name)
 def test_measured_corpus(path):
     verdict = fc.check_measured(path)
-    if path.suffix == ".s1p" and verdict == "warning":
-        pytest.xfail("Touchstone reading moves to scikit-rf")
     assert verdict == ("ok" if path.name.startswith("good_") else "rejected")
 
 
@@ -142,12 +138,12 @@ def test_measured_corpus(path):
 def test_fuzzed_options(tmp_path, seed):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     try:
-        from bench_fuzz import option_case
+        from bench_fuzz import option_case, option_names
     finally:
         sys.path.pop(0)
     argv, option = option_case(random.Random(seed), tmp_path)
     outcome = fc.run_cli(argv)
-    verdict = fc.judge(outcome, [option, option.lstrip("-")], json_mode="--json" in argv)
+    verdict = fc.judge(outcome, option_names(argv, option), json_mode="--json" in argv)
     assert verdict in ("ok", "rejected"), (argv, outcome.stderr, outcome.exception)
 
 
@@ -160,3 +156,26 @@ def test_subprocess_rejections_are_one_line(tmp_path):
         assert proc.returncode == 2 and proc.stdout == ""
         lines = proc.stderr.strip().splitlines()
         assert len(lines) == 1 and words in lines[0], proc.stderr
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["study", "two-section", "--quick", "--cases", " ", "--json"], "--cases: empty list"),
+    (["frf", "--model", "two-section", "--port", "0", "--json"], "--port '0' is ground"),
+    (["simulate", "--model", "two-section", "--vdc", "30", "--fclk", "10k", "--rpris", "31.8k", "--lpris", "2.53",
+      "--cpris", "10n", "--prbs-order", "4", "--fs", "100k", "--periods", "1", "--out", "999", "--json"],
+     "--out 999: unknown waveform format"),
+    (["simulate", "--model", "two-section", "--vdc", "30", "--fclk", "10k", "--rpris", "1e12", "--lpris", "2.53",
+      "--cpris", "10n", "--prbs-order", "4", "--fs", "100k", "--periods", "1", "--out", "w.csv", "--json"],
+     "--rpris 1e+12 Ohm is outside the accepted range"),
+    (["frf", "--model", "two-section", "--points", "1" * 60, "--json"], "--points 1111"),
+    (["simulate", "--model", "two-section", "--vdc", "30", "--fclk", "10k", "--rpris", "31.8k", "--lpris", "2.53",
+      "--cpris", "10n", "--prbs-order", "4", "--fs", "100k", "--periods", "1", "--out", "w.csv", "--probe", "0",
+      "--json"], "--probe '0' is ground"),
+    (["simulate", "--model", "two-section", "--vdc", "30", "--fclk", "10k", "--rpris", "31.8k", "--lpris", "2.53",
+      "--cpris", "10n", "--prbs-order", "4", "--fs", "100k", "--periods", "1", "--out", "w.csv", "--lsw", "1e-6",
+      "--json"], "--lsw needs --csw"),
+])
+def test_lines_found_by_the_long_fuzz_run(argv, words):
+    """Command lines the long run (benchmarks/bench_fuzz.py) found hanging or refused without the option's name."""
+    outcome = fc.run_cli(argv, timeout_s=20)
+    assert outcome.code == 2 and len(outcome.lines()) == 1 and words in outcome.stderr, (outcome.stderr, outcome.exception)

@@ -1,35 +1,52 @@
-"""The catalogue of frequency-response causes and the model extension each one adds.
+"""The catalogue of frequency-response causes: each a change of branch impedances with frequency.
 
-Every extension names the cause (as in the command line's ``cause``), its
-extra parameters with bounds and starting points, and how it changes
-element values with frequency. Each also builds a time-domain realisation
-(passive R-L ladders, :mod:`pris_cosim.freqdep`) so the extended model can be
-simulated and exported as an FMU.
+Every cause comes in the thesis's form, exactly as printed (real-valued
+element values, :mod:`pris_cosim.freqdep`), and in a causal form (a complex
+impedance that a passive network can realise). Both forms name the same
+cause; the diagnosis fits both and keeps the better. With several windings
+each cause is tried per winding group (``lv`` only, ``hv`` only, ``all``).
 
-- ``skin-effect``: every winding resistance becomes the impedance
-  ``R_i (1 + a (j f/f0)^b)`` (a, b shared). Its real part rises as
-  ``R_i (1 + a cos(pi b/2) (f/f0)^b)``; its reactance is the internal
-  inductance that falls as the current crowds to the surface. This causal
-  fractional form (b = 1/2 is the classical skin effect) is what a passive
-  ladder realises; a real-only R(f) is not causal.
-- ``core-loss``: the core-loss resistance follows (2.4) ``a f / (f + b)``;
-  a circuit without one gets a shunt core-loss resistance at the port.
-- ``magnetising-inductance``: every winding inductance ``L_i (f/f0)^(-b)``
-  (the thesis's (2.5) with its scale ``a`` absorbed by refitting ``L_i``).
-- ``missing-section``: one more section in the winding cascade (two more in
-  a two-winding model's HV winding, keeping its symmetry).
+``skin-effect``
+    thesis (2.6): ``R(f) = R_linear / c [1 + a (f/f0 - 1)^b]`` for
+    ``f >= f0`` (``R_linear / c`` below; ``R_linear / c`` is the fitted
+    circuit resistance, so ``c = 1``); causal: ``R (1 + a (j f/f_ref)^b)``
+    (``b = 1/2`` is the classical skin effect; its reactance is the internal
+    inductance).
+``core-loss``
+    thesis (2.4): ``R_c(f) = a f / (f + b)``; causal: ``a (j f/b) / (1 + j f/b)``
+    (``a`` in parallel with ``a / (2 pi b)`` H). A circuit without a core-loss
+    resistor (one in parallel with an inductor) gets one at the port.
+``magnetising-inductance``
+    thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = f_ref^b``: ``a`` and
+    ``L_linear`` are not separable, so ``L(f_ref) = L_linear``); causal:
+    ``L (j f/f_ref)^(-b)``. Applied to the winding inductances with their
+    mutuals (``M_ij`` scales with ``sqrt(L_i L_j)``).
+``stray-capacitance``
+    one-port data: a lossy fixture capacitance across the port, the causal
+    constant-phase admittance ``Y = w0 C (j f/f0)^alpha`` (``alpha = 1`` an
+    ideal capacitor, below 1 a dielectric loss of angle ``(1 - alpha) 90 deg``).
+``lead-inductance``
+    one-port data: a series lead ``R_l + j w L_l`` between the instrument and the port.
+
+``missing-section`` is structural (see :mod:`.sections`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from pris_cosim.circuit import GROUND, Circuit
-from pris_cosim.freqdep import core_loss_resistance, fit_impedance, fit_inductance, fit_resistance, replace_with_ladder
-from pris_cosim.models import Model, cascade, two_winding
+from pris_cosim.freqdep import (FosterRL, core_loss_resistance, fit_impedance, fit_inductance, fit_resistance,
+                                magnetising_inductance, replace_with_ladder, thesis_skin_resistance)
+
+from .sections import find_chains
+
+#: Causes of the frequency-response catalogue, in the order they are listed.
+FREQUENCY_CAUSES = ("skin-effect", "core-loss", "magnetising-inductance", "missing-section", "stray-capacitance",
+                    "lead-inductance")
 
 
 @dataclass(frozen=True)
@@ -44,19 +61,40 @@ class ExtraParameter:
     description: str = ""
 
 
-def winding_resistors(circuit: Circuit) -> list[str]:
-    """Resistors in series with an inductor through an internal node (the R of an ``R + sL`` branch)."""
-    degree: dict[str, int] = {}
-    for e in circuit.elements:
-        if e.kind != "K":
-            for n in e.nodes:
-                degree[n] = degree.get(n, 0) + 1
-    inductor_nodes = {n for e in circuit.inductors() for n in e.nodes}
-    out = []
-    for e in circuit.of_kind("R"):
-        if any(n != GROUND and degree.get(n) == 2 and n in inductor_nodes for n in e.nodes):
-            out.append(e.name)
-    return out
+@dataclass(frozen=True)
+class Groups:
+    """Winding resistors and inductors of a circuit by group (``all``, ``lv``, ``hv`` or a port name)."""
+
+    resistors: dict[str, tuple[str, ...]]
+    inductors: dict[str, tuple[str, ...]]
+    core_resistor: str | None
+    port: str
+
+
+def winding_groups(circuit: Circuit, ports: Sequence[str], names: Mapping[str, str] | None = None) -> Groups:
+    """Group the winding elements by chain (see :func:`.sections.find_chains`).
+
+    Parameters
+    ----------
+    circuit : Circuit
+    ports : sequence of str
+        Driven nodes; the first is the port of one-port effects.
+    names : mapping, optional
+        Port node to group name (``{"a1": "lv", "b1": "hv"}``); default the node name.
+    """
+    chains = find_chains(circuit, ports)
+    res: dict[str, tuple[str, ...]] = {}
+    ind: dict[str, tuple[str, ...]] = {}
+    for ch in chains:
+        g = (names or {}).get(ch.port, ch.port)
+        res[g] = tuple(ch.resistors)
+        ind[g] = tuple(ch.inductors)
+    if len(chains) > 1:
+        res = {k: v for k, v in res.items() if v}
+        ind = {k: v for k, v in ind.items() if v}
+    res["all"] = tuple(r for ch in chains for r in ch.resistors)
+    ind["all"] = tuple(i for ch in chains for i in ch.inductors)
+    return Groups(res, ind, core_loss_resistor(circuit), circuit.require_node(ports[0]) if ports else "")
 
 
 def core_loss_resistor(circuit: Circuit) -> str | None:
@@ -68,211 +106,380 @@ def core_loss_resistor(circuit: Circuit) -> str | None:
     return None
 
 
-def winding_inductors(circuit: Circuit) -> list[str]:
-    """Inductors that are part of an ``R + sL`` winding branch (core-loop inductors excluded)."""
-    rc = core_loss_resistor(circuit)
-    core_l = {l.name for l in circuit.inductors() if rc and set(l.nodes) == set(circuit.element(rc).nodes)}
-    return [l.name for l in circuit.inductors() if l.name not in core_l]
+def _p(p: Mapping[str, np.ndarray], name: str) -> np.ndarray:
+    return np.asarray(p[name], float).reshape(-1, 1)
+
+
+def _col(values: Mapping[str, np.ndarray | float], name: str) -> np.ndarray:
+    return np.asarray(values[name.lower()], float).reshape(-1, 1)
 
 
 @dataclass
-class Extension:
-    """Base class: a named cause with extra parameters."""
+class Effect:
+    """One variant of a cause: its form, its winding group and its parameters.
+
+    Subclasses give :meth:`branch_changes` (impedance changes of R or L
+    branches) or :meth:`port_map` (a change at the port), the formula text and
+    a time-domain realisation.
+    """
 
     cause: str = "none"
+    form: str = "causal"
+    group: str = "all"
     parameters: list[ExtraParameter] = field(default_factory=list)
-    note: str = ""
+    f_ref: float = 1.0
 
-    def prepare(self, circuit: Circuit) -> Circuit:
-        """Structural change (added elements); default none."""
+    @property
+    def label(self) -> str:
+        """``cause`` with its form and group, e.g. ``skin-effect (2.6) [hv]``."""
+        form = {"thesis": self.thesis_eq, "causal": "causal"}.get(self.form, self.form)
+        return f"{self.cause} ({form}) [{self.group}]"
+
+    thesis_eq = ""
+
+    def prepare(self, circuit: Circuit, groups: Groups, scale: float) -> Circuit:
+        """Structural change needed by the effect (default none)."""
         return circuit
 
-    def per_frequency(self, circuit: Circuit, values: Mapping[str, float], f: np.ndarray, p: Mapping[str, float]) -> dict[str, np.ndarray]:
-        """Element values that vary with frequency (name -> array over ``f``)."""
-        return {}
+    def fixed(self, circuit: Circuit, groups: Groups) -> list[str]:
+        """Circuit values the effect replaces (kept out of the fit)."""
+        return []
 
-    def realise(self, circuit: Circuit, values: Mapping[str, float], p: Mapping[str, float], fmin: float, fmax: float) -> Circuit:
-        """A time-domain circuit (ladders) equivalent over ``[fmin, fmax]``."""
-        return circuit
+    def branches(self, circuit: Circuit, groups: Groups) -> list[str]:
+        """R or L elements whose impedance the effect changes."""
+        return []
+
+    def branch_changes(self, circuit: Circuit, groups: Groups, values: Mapping[str, np.ndarray], f: np.ndarray,
+                       p: Mapping[str, np.ndarray]) -> list[tuple[list[str], np.ndarray]]:
+        """Impedance changes ``(names, dZ)`` with ``dZ`` of shape ``(P, F, m, m)``, Ohm."""
+        return []
+
+    def port_map(self, z: np.ndarray, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Impedance seen at the instrument for port impedance ``z`` (P, F); default unchanged."""
+        return z
+
+    def applies(self, circuit: Circuit, groups: Groups) -> bool:
+        return bool(self.branches(circuit, groups))
+
+    def formula(self, p: Mapping[str, float]) -> str:
+        return ""
+
+    def realise(self, circuit: Circuit, groups: Groups, p: Mapping[str, float], fmin: float, fmax: float
+                ) -> tuple[Circuit, str]:
+        """A circuit of constant R, L, C, K realising the effect over ``[fmin, fmax]``, and a note."""
+        return circuit, ""
 
 
+def _diag(names: Sequence[str], dz: np.ndarray) -> list[tuple[list[str], np.ndarray]]:
+    """Diagonal changes ``dz`` (P, F, m) as one block."""
+    P, F, m = dz.shape
+    block = np.zeros((P, F, m, m), complex)
+    idx = np.arange(m)
+    block[:, :, idx, idx] = dz
+    return [(list(names), block)]
+
+
+# ---------------------------------------------------------------------------------------------- skin effect
 @dataclass
-class SkinEffect(Extension):
-    f0: float = 1.0
-
+class SkinEffect(Effect):
     def __post_init__(self) -> None:
         self.cause = "skin-effect"
-        self.parameters = [
-            ExtraParameter("a", 1e-4, 1e4, (1e-3, 0.3, 10.0), description="resistance rise at f0 (x R)"),
-            ExtraParameter("b", 0.1, 1.0, (0.5,), log=False, description="frequency exponent"),
-        ]
+        self.thesis_eq = "2.6"
+        if self.form == "thesis":
+            self.parameters = [
+                ExtraParameter("a", 1e-4, 1e5, (0.01, 0.3, 3.0), description="a_Rs: rise factor"),
+                ExtraParameter("b", 0.2, 2.5, (0.5, 1.0), log=False, description="b_Rs: exponent"),
+                ExtraParameter("f0", self.f_ref / 30, self.f_ref * 3e3, (self.f_ref / 3, self.f_ref * 3),
+                               description="f0: frequency of R_linear, Hz"),
+            ]
+        else:
+            self.parameters = [
+                ExtraParameter("a", 1e-4, 1e4, (1e-3, 0.3, 10.0), description="resistance rise at f_ref (x R)"),
+                ExtraParameter("b", 0.1, 1.0, (0.5,), log=False, description="frequency exponent"),
+            ]
 
-    def _targets(self, circuit: Circuit) -> list[str]:
-        return winding_resistors(circuit)
+    def branches(self, circuit, groups):
+        return list(groups.resistors.get(self.group, ()))
 
-    def per_frequency(self, circuit, values, f, p):
-        factor = 1 + p["a"] * (1j * f / self.f0) ** p["b"]
-        return {name: values[name.lower()] * factor for name in self._targets(circuit)}
+    def factor(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
+        """``R(f) / R`` (P, F)."""
+        if self.form == "thesis":
+            return thesis_skin_resistance(f[None, :], 1.0, _p(p, "a"), _p(p, "b"), 1.0, _p(p, "f0")).astype(complex)
+        return 1 + _p(p, "a") * (1j * f[None, :] / self.f_ref) ** _p(p, "b")
 
-    def realise(self, circuit, values, p, fmin, fmax):
+    def branch_changes(self, circuit, groups, values, f, p):
+        names = self.branches(circuit, groups)
+        fac = self.factor(f, p) - 1
+        dz = np.stack([_col(values, n) * fac for n in names], axis=-1)
+        return _diag(names, dz)
+
+    def formula(self, p):
+        if self.form == "thesis":
+            return (f"R(f) = R_linear/c [1 + a (f/f0 - 1)^b] for f >= f0 (thesis 2.6), c = 1, a = {p['a']:.4g}, "
+                    f"b = {p['b']:.4g}, f0 = {p['f0']:.4g} Hz")
+        return f"Z_R(f) = R [1 + a (j f/{self.f_ref:.4g} Hz)^b], a = {p['a']:.4g}, b = {p['b']:.4g}"
+
+    def realise(self, circuit, groups, p, fmin, fmax):
+        values = circuit.resolve(check=False)
         out = circuit
-        for name in self._targets(circuit):
-            r = values[name.lower()]
-            lad = fit_impedance(lambda x, r=r: r * (1 + p["a"] * (1j * x / self.f0) ** p["b"]), fmin, fmax, 12)
-            out = replace_with_ladder(out, name, lad)
-        return out
+        pp = {k: np.array([v]) for k, v in p.items()}
+        for name in self.branches(circuit, groups):
+            r = float(values[name.lower()])
+            if self.form == "thesis":
+                lad = fit_resistance(lambda x, r=r: r * self.factor(np.atleast_1d(x), pp)[0].real, fmin, fmax, 12)
+            else:
+                lad = fit_impedance(lambda x, r=r: r * self.factor(np.atleast_1d(x), pp)[0], fmin, fmax, 12)
+            out = replace_with_ladder(_numeric(out, name), name, lad)
+        note = ("a real-valued R(f) has no causal realisation: the ladder follows its resistance and adds its own "
+                "reactance" if self.form == "thesis" else "passive R-L ladders in place of the winding resistances")
+        return out, note
 
 
+# ---------------------------------------------------------------------------------------------- core loss
 @dataclass
-class CoreLoss(Extension):
-    fmid: float = 1.0
-
+class CoreLoss(Effect):
     def __post_init__(self) -> None:
         self.cause = "core-loss"
+        self.thesis_eq = "2.4"
         self.parameters = [
-            ExtraParameter("a", 1e-3, 1e12, (), description="high-frequency core-loss resistance (Ohm)"),
-            ExtraParameter("b", 1e-3, 1e12, (), description="corner frequency (Hz)"),
+            ExtraParameter("a", 1e-3, 1e12, (1e6,), description="a_Ro: high-frequency core-loss resistance, Ohm"),
+            ExtraParameter("b", 1e-3, 1e12, (1e3,), description="b_Ro: corner frequency, Hz"),
         ]
 
-    def prepare(self, circuit: Circuit) -> Circuit:
-        if core_loss_resistor(circuit) is not None:
-            return circuit
-        c = circuit.copy()
-        c.add("Rcore", c.ports[0] if c.ports else c.nodes[0], GROUND, 1.0)
-        return c
-
-    def starts(self, circuit: Circuit, values: Mapping[str, float], impedance_scale: float) -> list[dict[str, float]]:
-        rc = core_loss_resistor(circuit)
-        base = values[rc.lower()] if rc and rc != "Rcore" else 30 * impedance_scale
-        starts = [{"a": base * m, "b": self.fmid * g} for m in (1.0, 10.0) for g in (0.1, 1.0, 10.0)]
-        return starts + [{"a": 1e11, "b": self.fmid}]  # effectively no core loss: never worse than the baseline
-
-    def _resistor(self, circuit: Circuit) -> str:
+    def resistor(self, circuit: Circuit, groups: Groups) -> str:
         return core_loss_resistor(circuit) or "Rcore"
 
-    def per_frequency(self, circuit, values, f, p):
-        return {self._resistor(circuit): core_loss_resistance(f, p["a"], p["b"])}
+    def prepare(self, circuit, groups, scale):
+        if core_loss_resistor(circuit) is not None or circuit.has_element("Rcore"):
+            return circuit
+        c = circuit.copy()
+        c.add("Rcore", groups.port or c.nodes[0], GROUND, 1e3 * scale)
+        return c
 
-    def realise(self, circuit, values, p, fmin, fmax):
-        lad = fit_resistance(lambda x: core_loss_resistance(x, p["a"], p["b"]), fmin, fmax, 10)
-        return replace_with_ladder(circuit, self._resistor(circuit), lad)
+    def fixed(self, circuit, groups):
+        return [self.resistor(circuit, groups)]
+
+    def branches(self, circuit, groups):
+        return [self.resistor(circuit, groups)]
+
+    def applies(self, circuit, groups):
+        return True
+
+    def starts(self, circuit: Circuit, values: Mapping[str, float], scale: float, fmin: float, fmax: float
+               ) -> list[dict[str, float]]:
+        rc = core_loss_resistor(circuit)
+        base = float(values[rc.lower()]) if rc and rc != "Rcore" else 30 * scale
+        fmid = float(np.sqrt(fmin * fmax))
+        starts = [{"a": base * m, "b": fmid * g} for m in (1.0, 10.0) for g in (0.01, 0.1, 1.0, 10.0)]
+        return starts + [{"a": 1e11, "b": fmid}]  # effectively no core loss: never worse than the baseline
+
+    def resistance(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
+        """``R_c(f)`` (P, F), complex for the causal form."""
+        if self.form == "thesis":
+            return core_loss_resistance(f[None, :], _p(p, "a"), _p(p, "b")).astype(complex)
+        x = 1j * f[None, :] / _p(p, "b")
+        return _p(p, "a") * x / (1 + x)
+
+    def branch_changes(self, circuit, groups, values, f, p):
+        name = self.resistor(circuit, groups)
+        dz = self.resistance(f, p) - _col(values, name)
+        return _diag([name], dz[..., None])
+
+    def formula(self, p):
+        if self.form == "thesis":
+            return f"R_c(f) = a f / (f + b) (thesis 2.4), a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz"
+        return f"Z_c(f) = a (j f/b) / (1 + j f/b), a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz"
+
+    def realise(self, circuit, groups, p, fmin, fmax):
+        name = self.resistor(circuit, groups)
+        if self.form == "thesis":
+            lad = fit_resistance(lambda x: core_loss_resistance(x, p["a"], p["b"]), fmin, fmax, 10)
+            note = ("a real-valued R_c(f) has no causal realisation: the ladder follows its resistance and adds its "
+                    "own reactance")
+        else:
+            lad = FosterRL(0.0, 0.0, np.array([p["a"]]), np.array([p["a"] / (2 * np.pi * p["b"])]))
+            note = "R_c(f) realised exactly by a in parallel with a / (2 pi b)"
+        return replace_with_ladder(_numeric(circuit, name), name, lad), note
 
 
+# ---------------------------------------------------------------------------------------------- magnetising
 @dataclass
-class MagnetisingInductance(Extension):
-    f0: float = 1.0
-
+class MagnetisingInductance(Effect):
     def __post_init__(self) -> None:
         self.cause = "magnetising-inductance"
-        self.parameters = [ExtraParameter("b", 0.0, 1.0, (1e-4, 0.02, 0.04, 0.07, 0.1, 0.2), log=False,
-                                          description="exponent of (2.5)")]
+        self.thesis_eq = "2.5"
+        lo = 0.0 if self.form == "thesis" else 1e-4
+        self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
+                                          description="b_Lo: exponent")]
 
-    def per_frequency(self, circuit, values, f, p):
-        factor = (f / self.f0) ** (-p["b"])
-        return {name: values[name.lower()] * factor for name in winding_inductors(circuit)}
+    def branches(self, circuit, groups):
+        group = set(n.lower() for n in groups.inductors.get(self.group, ()))
+        if not group:
+            return []
+        coupled = set(group)
+        for k in circuit.of_kind("K"):
+            a, b = (n.lower() for n in k.nodes)
+            if a in group or b in group:
+                coupled |= {a, b}
+        return [l.name for l in circuit.inductors() if l.key in coupled]
 
-    def realise(self, circuit, values, p, fmin, fmax):
+    def applies(self, circuit, groups):
+        return bool(groups.inductors.get(self.group))
+
+    def scale(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
+        """``L(f) / L`` (P, F)."""
+        if self.form == "thesis":
+            b = _p(p, "b")
+            return magnetising_inductance(f[None, :], 1.0, self.f_ref ** b, b).astype(complex)
+        return (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
+
+    def branch_changes(self, circuit, groups, values, f, p):
+        names = self.branches(circuit, groups)
+        group = set(n.lower() for n in groups.inductors.get(self.group, ()))
+        sub = Circuit(elements=[circuit.element(n) for n in names] +
+                      [k for k in circuit.of_kind("K") if all(x.lower() in {n.lower() for n in names} for x in k.nodes)])
+        L = sub.inductance_matrix({e.key: np.asarray(values[e.key], float) for e in sub.elements})
+        L = L.reshape((-1,) + L.shape[-2:])  # (P, m, m)
+        g = self.scale(f, p)  # (P, F)
+        d = np.ones(g.shape + (len(names),), complex)
+        for j, n in enumerate(names):
+            if n.lower() in group:
+                d[..., j] = np.sqrt(g)
+        s = 2j * np.pi * f[None, :, None, None]
+        dz = s * (d[..., :, None] * L[:, None] * d[..., None, :] - L[:, None])
+        return [(names, dz)]
+
+    def formula(self, p):
+        if self.form == "thesis":
+            return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
+                    f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
+        return f"Z_L(f) = j w L (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}"
+
+    def realise(self, circuit, groups, p, fmin, fmax):
+        values = circuit.resolve(check=False)
         out = circuit
-        for name in winding_inductors(circuit):
-            lv = values[name.lower()]
-            lad = fit_inductance(lambda x, lv=lv: lv * (x / self.f0) ** (-p["b"]), fmin, fmax, 8)
-            out = replace_with_ladder(out, name, lad)
-        return out
+        pp = {k: np.array([v]) for k, v in p.items()}
+        for name in groups.inductors.get(self.group, ()):
+            lv = float(values[name.lower()])
+            if self.form == "thesis":
+                lad = fit_inductance(lambda x, lv=lv: lv * self.scale(np.atleast_1d(x), pp)[0].real, fmin, fmax, 8)
+            else:
+                lad = fit_impedance(lambda x, lv=lv: 2j * np.pi * x * lv * self.scale(np.atleast_1d(x), pp)[0],
+                                    fmin, fmax, 10)
+            out = replace_with_ladder(_numeric(out, name), name, lad)
+        note = ("winding inductances as R-L ladders; coupled inductors keep their couplings on the ladder's series "
+                "inductance, the sections are uncoupled")
+        if self.form == "thesis":
+            note = "a real-valued L(f) has no causal realisation; " + note
+        return out, note
+
+
+# ---------------------------------------------------------------------------------------------- port effects
+@dataclass
+class StrayCapacitance(Effect):
+    """A lossy capacitance across the port (fixture, leads): constant-phase admittance."""
+
+    c_scale: float = 1e-12
+
+    def __post_init__(self) -> None:
+        self.cause = "stray-capacitance"
+        self.parameters = [
+            ExtraParameter("c", self.c_scale * 1e-3, self.c_scale * 1e3, (self.c_scale * 0.1, self.c_scale),
+                           description="capacitance at f0, F"),
+            ExtraParameter("alpha", 0.3, 1.0, (0.7, 0.95), log=False, description="constant-phase exponent"),
+        ]
+
+    def applies(self, circuit, groups):
+        return True
+
+    def admittance(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
+        w0 = 2 * np.pi * self.f_ref
+        return w0 * _p(p, "c") * (1j * f[None, :] / self.f_ref) ** _p(p, "alpha")
+
+    def port_map(self, z, f, p):
+        return z / (1 + z * self.admittance(f, p))
+
+    def formula(self, p):
+        loss = (1 - p["alpha"]) * 90
+        return (f"Y(f) = 2 pi f0 C (j f/f0)^alpha across the port, C = {p['c']:.4g} F, alpha = {p['alpha']:.4g} "
+                f"(loss angle {loss:.3g} deg), f0 = {self.f_ref:.4g} Hz")
+
+    def realise(self, circuit, groups, p, fmin, fmax):
+        from .ladders import fit_admittance_rc
+
+        c = circuit.copy()
+        pp = {k: np.array([v]) for k, v in p.items()}
+        branches = fit_admittance_rc(lambda x: self.admittance(np.atleast_1d(x), pp)[0], fmin, fmax)
+        port = groups.port
+        for i, (r, cap) in enumerate(branches, start=1):
+            if r > 0:
+                node = f"stray_n{i}"
+                c.add(f"Rstray{i}", port, node, r)
+                c.add(f"Cstray{i}", node, GROUND, cap)
+            else:
+                c.add(f"Cstray{i}", port, GROUND, cap)
+        return c, "constant-phase admittance realised by parallel series-R-C branches across the port"
 
 
 @dataclass
-class MissingSection(Extension):
-    """One more winding section: built from the model family, split from a fitted section."""
+class LeadInductance(Effect):
+    """A series lead between the instrument and the port: ``R_l + j w L_l``."""
 
-    model: Model | None = None
+    l_scale: float = 1e-9
+    r_scale: float = 1e-3
 
     def __post_init__(self) -> None:
-        self.cause = "missing-section"
-        self.parameters = []
+        self.cause = "lead-inductance"
+        self.parameters = [
+            ExtraParameter("l", self.l_scale * 1e-4, self.l_scale * 1e3, (self.l_scale * 0.01, self.l_scale * 0.3),
+                           description="lead inductance, H"),
+            ExtraParameter("r", self.r_scale * 1e-4, self.r_scale * 1e3, (self.r_scale * 0.01,),
+                           description="lead resistance, Ohm"),
+        ]
 
-    def candidates(self, values: Mapping[str, float]) -> list[tuple[Circuit, set[str]]]:
-        """Starting circuits with one more section, and the names of the new section's elements.
+    def applies(self, circuit, groups):
+        return True
 
-        Starts: each existing section split into two halves, and a typical
-        section appended at the neutral end over a grid of L and C. The second
-        item of each pair lists the new elements, fitted alone first.
-        """
-        fam = self.model.family if self.model else ()
-        out: list[tuple[Circuit, dict[str, float]]] = []
-        if fam and fam[0] == "lumped":
-            r, l, c = values["r1"], values["l1"], values["c1"]
-            for share in (0.5, 0.8, 0.95):
-                m = cascade(2, R=[r * share, r * (1 - share)], L=[l * share, l * (1 - share)],
-                            C=[c / share, c / (1 - share)], Cg=[c * 1e-3, c * 1e-3], k=0.0)
-                out.append((m.circuit, {"R2", "L2", "C2"}))
-        elif fam and fam[0] == "cascade":
-            n, neutral = fam[1], fam[2]
-            R = [values[f"r{i}"] for i in range(1, n + 1)]
-            L = [values[f"l{i}"] for i in range(1, n + 1)]
-            C = [values[f"c{i}"] for i in range(1, n + 1)]
-            n_cg = n + 1 if neutral == "open" else n
-            Cg = [values[f"cg{i}"] for i in range(1, n_cg + 1)]
-            rho = _nearest_neighbour_coupling(values, n)
-            starts = []
-            for j in range(n):  # split section j into two halves
-                starts.append((R[:j] + [R[j] / 2] * 2 + R[j + 1:], L[:j] + [L[j] / 2] * 2 + L[j + 1:],
-                               C[:j] + [2 * C[j]] * 2 + C[j + 1:], Cg[:j + 1] + [Cg[j]] + Cg[j + 1:]))
-            for ls in (0.3, 1.0, 3.0):  # append a typical section at the neutral end
-                for cs in (0.3, 1.0, 3.0):
-                    starts.append((R + [float(np.mean(R))], L + [float(np.mean(L)) * ls], C + [float(np.mean(C)) * cs],
-                                   Cg + [float(np.mean(Cg))]))
-            new = {f"R{n + 1}", f"L{n + 1}", f"C{n + 1}", f"Cg{n + 1}"}
-            for R2, L2, C2, Cg2 in starts:
-                out.append((cascade(n + 1, R=R2, L=L2, C=C2, Cg=Cg2[: n_cg + 1], k=rho, neutral=neutral).circuit, new))
-        elif fam and fam[0] == "two-winding":
-            out += self._two_winding(values)
-        return out
+    def port_map(self, z, f, p):
+        return z + _p(p, "r") + 2j * np.pi * f[None, :] * _p(p, "l")
 
-    def _two_winding(self, values: Mapping[str, float]) -> list[tuple[Circuit, set[str]]]:
-        _, N, cab2, tied = self.model.family
-        v = {k: float(x) for k, x in values.items()}
-        lb = [v[f"lb{i}"] for i in range(1, N + 1)]
-        cb = [v[f"cb{i}"] for i in range(1, N + 1)]
-        M = N + 2
-        new: dict[str, float] = {"Ra1": v["ra1"], "La1": v["la1"], "Ca10": v["ca10"], "Rb": v["rb1"],
-                                 "Cb10": v["cb10"], "Cab1": v.get("cab1", 1e-12), "Lc": v["lc"], "Rc": v["rc"]}
-        # split the first and last HV sections in two (keeps the midpoint in the middle)
-        lb2 = [lb[0] / 2, lb[0] / 2] + lb[1:-1] + [lb[-1] / 2, lb[-1] / 2]
-        cb2 = [2 * cb[0], 2 * cb[0]] + cb[1:-1] + [2 * cb[-1], 2 * cb[-1]]
-        for i in range(M):
-            new[f"Lb{i + 1}"], new[f"Cb{i + 1}"] = lb2[i], cb2[i]
-        new[f"Cb1{M // 2}"] = v[f"cb1{N // 2}"]
-        new[f"Cb{M // 2 + 1}{M}"] = v[f"cb{N // 2 + 1}{N}"]
-        mean_k = float(np.mean([x for k, x in v.items() if k.startswith("kb")])) if any(k.startswith("kb") for k in v) else 0.99
-        mean_ka = float(np.mean([x for k, x in v.items() if k.startswith("ka1b")]))
-        core = float(np.mean([x for k, x in v.items() if k.endswith("c") and k.startswith("k")]))
-        windings = ["a1"] + [f"b{i}" for i in range(1, M + 1)]
-        for i, x in enumerate(windings):
-            for y in windings[i + 1:]:
-                new[f"K{x}{y}"] = mean_ka if x == "a1" else mean_k
-            new[f"K{x}c"] = core
-        new["Kc"] = core
-        if cab2:
-            new["Cab2"] = v.get("cab2", 1e-12)
-        added = {f"Lb{i}" for i in (1, 2, M - 1, M)} | {f"Cb{i}" for i in (1, 2, M - 1, M)}
-        return [(two_winding(M, new, cab2=cab2, tied_core_coupling=tied).circuit, added)]
+    def formula(self, p):
+        return f"Z_lead = R_l + j w L_l, R_l = {p['r']:.4g} Ohm, L_l = {p['l']:.4g} H"
+
+    def realise(self, circuit, groups, p, fmin, fmax):
+        port = groups.port
+        inner = "lead_port"
+        c = Circuit(circuit.title, [replace(e, nodes=tuple(inner if n == port else n for n in e.nodes))
+                                    if e.kind != "K" else e for e in circuit.elements],
+                    list(circuit.parameters), list(circuit.ports), list(circuit.probes), list(circuit.comments))
+        c.add("Rlead", port, "lead_mid", p["r"])
+        c.add("Llead", "lead_mid", inner, p["l"])
+        return c, "series lead R-L between the terminal and the winding"
 
 
-def _nearest_neighbour_coupling(values: Mapping[str, float], n: int) -> float:
-    """Mean coupling between adjacent sections of a cascade (its ``rho``), 0.5 when uncoupled."""
-    ks = [values.get(f"k{i}{i + 1}", values.get(f"k{i}_{i + 1}")) for i in range(1, n)]
-    ks = [k for k in ks if k is not None]
-    return float(np.mean(ks)) if ks else 0.5
+def _numeric(circuit: Circuit, name: str) -> Circuit:
+    """The circuit with element ``name`` given its resolved numeric value (ladders replace numbers only)."""
+    v = float(circuit.resolve(check=False)[name.lower()])
+    return circuit.with_values({name: v})
 
 
-def frequency_extensions(model: Model | None, fmin: float, fmax: float) -> list[Extension]:
-    """The frequency-response catalogue for a baseline (missing-section only for known families)."""
-    f0 = float(fmin)
-    exts: list[Extension] = [SkinEffect(f0=f0), CoreLoss(fmid=float(np.sqrt(fmin * fmax))), MagnetisingInductance(f0=f0)]
-    if model is not None and model.family:
-        exts.append(MissingSection(model=model))
-    return exts
-
-
-def as_dict(p: Sequence[ExtraParameter], x: Sequence[float]) -> dict[str, float]:
-    return {q.name: float(v) for q, v in zip(p, x)}
+def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, one_port: bool,
+                    scale: float = 1.0, f_max: float = 1.0) -> list[Effect]:
+    """Every form and group of ``cause`` that applies to ``circuit``."""
+    out: list[Effect] = []
+    names = [g for g in groups.resistors if g != "all"]
+    group_list = (names + ["all"]) if len(names) > 1 else ["all"]
+    for form in ("thesis", "causal"):
+        if cause == "skin-effect":
+            out += [SkinEffect(form=form, group=g, f_ref=f_ref) for g in group_list]
+        elif cause == "magnetising-inductance":
+            out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref) for g in group_list]
+        elif cause == "core-loss":
+            out.append(CoreLoss(form=form, group="all", f_ref=f_ref))
+    if one_port and cause == "stray-capacitance":
+        w = 2 * np.pi * f_max
+        out.append(StrayCapacitance(form="causal", group="port", f_ref=f_max, c_scale=1 / (w * scale)))
+    if one_port and cause == "lead-inductance":
+        w = 2 * np.pi * f_max
+        out.append(LeadInductance(form="causal", group="port", f_ref=f_max, l_scale=scale / w, r_scale=scale))
+    return [e for e in out if e.applies(circuit, groups)]

@@ -1,19 +1,36 @@
-"""Frequency-response diagnosis: fit the baseline, fit every extension, choose by BIC, measure the gain.
+"""Frequency-response diagnosis: fit the baseline, fit every cause, choose causes one by one, measure the gain.
 
-Selection: each extension is fitted together with the baseline's own values;
-the one with the lowest Bayesian information criterion
-``BIC = N ln(RSS/N) + k ln N`` wins only if it beats the baseline's BIC by
-at least ``min_delta_bic`` (10: "very strong" evidence on Kass and
-Raftery's scale) and removes at least ``min_gain`` of the baseline cost.
-Otherwise the diagnosis is ``none``: nothing beyond noise. An extra
-parameter therefore never wins by itself.
+Steps:
+
+1. The baseline (a built-in model, a netlist, or a lumped R-L-C fitted to
+   one-port data) is fitted to the data.
+2. Every cause of the catalogue (:mod:`.catalogue`: each in the thesis's
+   form and in a causal form, per winding group; :mod:`.sections`: a missing
+   section, split or added at either end of every winding) is fitted together
+   with the baseline's values. A fit that ends at or above the baseline
+   cost has failed: it is retried from further starts, and when none beats
+   the baseline it is reported as failed, never as a candidate. A candidate
+   whose circuit values, with the effect removed, fit better than the
+   baseline improves the baseline itself (so no gain comes from a better
+   optimum of the baseline).
+3. Forward selection: the cause with the lowest Bayesian information
+   criterion ``BIC = N ln(RSS/N) + k ln N`` is named if it beats the
+   baseline's BIC by ``min_delta_bic`` (10: "very strong" evidence on Kass and
+   Raftery's scale) and removes at least ``min_gain`` of the cost; then each
+   remaining cause is refitted together with those named, and the best is
+   added while its BIC improves by ``min_delta_bic`` and it removes at least
+   ``min_step_gain`` of the remaining cost. Selection stops when the cost
+   reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`).
+4. What is still above the noise after the last step is reported by band
+   (:func:`.evidence.unexplained_bands`).
 """
 
 from __future__ import annotations
 
+import itertools
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,12 +40,15 @@ from pris_cosim.circuit import Circuit
 from pris_cosim.frf import Response
 from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
 
-from .catalogue import CoreLoss, Extension, MissingSection, frequency_extensions
-from ..resonances import count_parallel, find_resonances
-from .evidence import band_table, localise, resonance_comparison
-from .fit import DiagnosisError, FitResult, FrequencyFit, significant
+from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
+from .evidence import band_table, localise, noise_floor, resonance_comparison, unexplained_bands
+from .fit import DiagnosisError, FitResult, FrequencyFit, configuration_ports, group_names, significant
+from .realise import realise_extended
+from .sections import section_candidates
 
 MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
+#: Selection stops once the cost is within this factor of the noise floor.
+NOISE_MARGIN = 1.25
 
 
 @dataclass
@@ -44,32 +64,47 @@ class Diagnosis:
     evidence: dict[str, Any] = field(default_factory=dict)
     realisation: dict[str, Any] = field(default_factory=dict)
     wall_s: float = 0.0
+    causes: list[str] = field(default_factory=list)
+    steps: list[dict[str, Any]] = field(default_factory=list)
+    noise: dict[str, Any] = field(default_factory=dict)
+    unexplained: list[dict[str, Any]] = field(default_factory=list)
+    failed: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def gain(self) -> float:
-        return 0.0 if self.best is None else 1 - self.best.cost / self.baseline.cost
+        """Fraction of the baseline cost removed by the model with every named cause."""
+        return 0.0 if self.best is None else max(0.0, 1 - self.best.cost / self.baseline.cost)
 
     def candidates(self) -> list[dict[str, Any]]:
         rows = []
         for r in self.fits:
             rows.append({
-                "cause": r.cause, "cost": r.cost, "gain": 1 - r.cost / self.baseline.cost, "bic": r.bic,
+                "cause": r.cause, "cost": r.cost, "gain": max(0.0, 1 - r.cost / self.baseline.cost), "bic": r.bic,
                 "delta_bic": self.baseline.bic - r.bic, "n_params": r.n_params, "extra": r.extra,
-                "wall_s": r.wall_s,
+                "form": r.effects[0].form if r.effects else "", "group": r.effects[0].group if r.effects else "",
+                "formula": r.describe()[0]["formula"] if r.effects else r.structure, "wall_s": r.wall_s,
             })
         return rows
 
     def as_json(self) -> dict[str, Any]:
+        ext = self.best
         return {
             "cause": self.cause,
+            "causes": list(self.causes),
+            "steps": list(self.steps),
             "candidates": self.candidates(),
             "baseline_cost": self.baseline.cost,
-            "extended_cost": self.best.cost if self.best else self.baseline.cost,
+            "extended_cost": ext.cost if ext else self.baseline.cost,
             "gain": self.gain,
+            "noise_floor": self.noise.get("cost", 0.0),
+            "noise": self.noise,
+            "unexplained": self.unexplained,
+            "failed": self.failed,
             "baseline_bic": self.baseline.bic,
-            "fitted_extension": self.best.extra if self.best else {},
+            "fitted_extension": ext.describe() if ext else [],
+            "structure": ext.structure if ext else "",
             "baseline_values": self.baseline.values,
-            "extended_values": self.best.values if self.best else {},
+            "extended_values": ext.values if ext else {},
             "evidence": self.evidence,
             "realisation": self.realisation,
             "wall_s": self.wall_s,
@@ -94,6 +129,23 @@ def lumped_from_data(f: np.ndarray, z: np.ndarray) -> list[Model]:
     return [lumped_rlc(r0, l0, 1 / ((2 * np.pi * fr) ** 2 * l0)) for fr in guesses]
 
 
+@dataclass
+class _Context:
+    """What every fit of one diagnosis shares."""
+
+    f: np.ndarray
+    data: dict[str, np.ndarray]
+    configs: list[Configuration]
+    fixed: tuple[str, ...]
+    scale: float
+    one_port: bool
+    progress: bool
+
+    def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = ()) -> FrequencyFit:
+        return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
+                            self.scale)
+
+
 def diagnose_frequency(
     frequency_hz: np.ndarray,
     measured: Mapping[str, np.ndarray],
@@ -102,6 +154,9 @@ def diagnose_frequency(
     port: str | None = None,
     min_delta_bic: float = 10.0,
     min_gain: float = 0.2,
+    min_step_gain: float = 0.2,
+    max_causes: int = 3,
+    causes: Sequence[str] | None = None,
     progress: bool = True,
 ) -> Diagnosis:
     """Diagnose measured frequency responses against a baseline model.
@@ -116,7 +171,13 @@ def diagnose_frequency(
     circuit, port : Circuit, str, optional
         Baseline given as a one-port netlist driven at ``port`` (response ``Zin``).
     min_delta_bic, min_gain : float
-        Thresholds for naming a cause instead of ``none``.
+        Thresholds for naming the first cause instead of ``none``.
+    min_step_gain : float
+        Fraction of the remaining cost a further cause must remove.
+    max_causes : int
+        Most causes named.
+    causes : sequence of str, optional
+        Causes to try (default: the whole catalogue).
     progress : bool
         Progress lines on stderr.
 
@@ -124,32 +185,58 @@ def diagnose_frequency(
     -------
     Diagnosis
     """
+    from threadpoolctl import threadpool_limits
+
+    from pris_cosim.errors import CircuitError
+
+    with threadpool_limits(limits=1):  # small matrices: BLAS threads only contend for the cores
+        try:
+            return _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_gain, min_step_gain,
+                             max_causes, causes, progress)
+        except CircuitError as exc:
+            raise DiagnosisError(f"baseline: {exc}") from None
+
+
+def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_gain, min_step_gain, max_causes,
+              causes, progress) -> Diagnosis:
     t0 = time.perf_counter()
     f = np.asarray(frequency_hz, float)
     data = {k: np.asarray(v, complex) for k, v in measured.items()}
     if not data:
         raise DiagnosisError("no measured responses")
+    if f.ndim != 1 or f.size < 5 or np.any(~np.isfinite(f)) or np.any(f <= 0) or np.any(np.diff(f) <= 0):
+        if f.size < 5:
+            raise DiagnosisError(f"too few points: {f.size} frequencies")
+        raise DiagnosisError("frequencies must be positive and increasing")
+    for k, v in data.items():
+        if v.shape != f.shape or not np.all(np.isfinite(v)) or np.any(v == 0):
+            raise DiagnosisError(f"response {k!r}: values must be finite, non-zero and one per frequency")
     if circuit is not None:
         if port is None:
             raise DiagnosisError("a netlist baseline needs --port")
+        port = circuit.require_node(port, "port")
         model = Model("netlist", circuit.title, circuit,
                       {"default": Configuration("default", port, (), (Response("Zin"),))})
+    todo = tuple(causes) if causes is not None else FREQUENCY_CAUSES
+    unknown = [c for c in todo if c not in FREQUENCY_CAUSES]
+    if unknown:
+        raise DiagnosisError(f"unknown cause {unknown[0]!r} (known: {', '.join(FREQUENCY_CAUSES)})")
     fixed = tuple(model.fixed) if model is not None else ()
+    impedance_scale = float(np.median([np.median(np.abs(v)) for k, v in data.items() if k.startswith("Z")] or [1.0]))
     # ---- baseline
     if model is None:
         if len(data) != 1:
             raise DiagnosisError(f"no baseline given: one-port data expected, got responses {', '.join(data)}")
-        name = next(iter(data))
-        data = {"Zin": data[name]}
+        data = {"Zin": next(iter(data.values()))}
         starts = lumped_from_data(f, data["Zin"])
         fits = [FrequencyFit(m.circuit, list(m.configurations.values()), f, data).fit() for m in starts]
         best_i = int(np.argmin([r.cost for r in fits]))
         baseline = fits[best_i]
-        model = Model("lumped-rlc", "Lumped R-L-C fitted to the data", baseline.circuit.with_values(baseline.values),
+        model = Model("lumped-rlc", "Lumped R-L-C fitted to the data", starts[best_i].circuit,
                       starts[best_i].configurations, family=("lumped",))
         _log(f"no baseline given: lumped R-L-C fitted (cost {baseline.cost:.4g})", progress)
     else:
-        baseline = FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed).fit()
+        baseline = FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed).fit(max_nfev=200)
         _log(f"baseline {model.name} fitted: cost {baseline.cost:.4g} in {baseline.wall_s:.1f} s", progress)
     worst = max(float(np.sqrt(np.mean(np.abs(e) ** 2))) for e in baseline.errors.values())
     if worst > MAX_BASELINE_RMS:
@@ -157,102 +244,279 @@ def diagnose_frequency(
             f"the baseline does not fit the data at all (RMS error {20 / np.log(10) * worst:.1f} dB after fitting); "
             "check the port, the test configuration or the model"
         )
-    fitted_model = Model(model.name, model.description, baseline.circuit.with_values(baseline.values),
-                         model.configurations, model.fixed, model.family)
-    values = fitted_model.circuit.resolve(check=False)
-    impedance_scale = float(np.median([np.median(np.abs(v)) for k, v in data.items() if k.startswith("Z")] or [1.0]))
-    # ---- candidates
-    results: list[FitResult] = []
-    for ext in frequency_extensions(fitted_model, f[0], f[-1]):
-        t = time.perf_counter()
-        if isinstance(ext, MissingSection):
-            res = _fit_missing_section(ext, values, f, data, fixed)
-        else:  # from the fitted baseline and from the nominal values (the baseline fit may have bent them)
-            res = None
-            for circuit in ((fitted_model.circuit, model.circuit) if model.circuit is not fitted_model.circuit
-                            else (fitted_model.circuit,)):
-                fit = FrequencyFit(circuit, list(model.configurations.values()), f, data, fixed, extension=ext)
-                starts = ext.starts(fit.circuit, values, impedance_scale) if isinstance(ext, CoreLoss) else None
-                trial = fit.fit(starts)
-                if res is None or trial.cost < res.cost:
-                    res = trial
-        if res is None:
+    configs = list(model.configurations.values())
+    one_port = len(configs) == 1 and all(r.node is None for r in configs[0].responses)
+    ctx = _Context(f, data, configs, fixed, impedance_scale, one_port, progress)
+    floor = noise_floor(f, data)
+    _log(f"noise floor {floor['cost']:.3g} (noise RMS "
+         + ", ".join(f"{k} {100 * v:.2g} %" for k, v in floor["per_response"].items()) + ")", progress)
+
+    # ---- single causes; a candidate's circuit values may fit better than the baseline's own optimum: then the
+    # baseline adopts them and every cause is fitted again from it (at most twice)
+    # (each cause keeps its best fit over the passes; no second pass once a cause reaches the noise floor)
+    results, failed, variants_tried = {}, [], {}
+    for attempt in range(3):
+        res_i, failed_i, variants_i = _single_causes(ctx, todo, baseline, progress)
+        for cause, r in res_i.items():
+            if cause not in results or r.cost < results[cause].cost:
+                results[cause] = r
+        failed = [x for x in failed + failed_i if x["cause"] not in results]
+        variants_tried.update(variants_i)
+        polished = _polish_baseline(ctx, baseline, results.values(), progress)
+        moved = polished.cost < 0.5 * baseline.cost
+        baseline = polished
+        explained = bool(results) and min(r.cost for r in results.values()) <= NOISE_MARGIN * floor["cost"]
+        if not moved or explained or attempt == 2:
+            break
+        _log("causes fitted again from the refitted baseline", progress)
+    for cause in list(results):
+        if results[cause].cost >= baseline.cost:
+            failed.append({"cause": cause, "cost": results.pop(cause).cost,
+                           "reason": "no better than the baseline refitted from its circuit values"})
+
+    # ---- forward selection
+    current, chosen, steps = baseline, [], []
+    pool = dict(results)
+    while pool and len(chosen) < max_causes:
+        if current.cost <= NOISE_MARGIN * floor["cost"]:
+            _log("cost at the noise floor: no further cause", progress)
+            break
+        best = min(pool.values(), key=lambda r: r.bic)
+        need = min_gain if not chosen else min_step_gain
+        if not significant(current.bic, current.cost, best.bic, best.cost, min_delta_bic, need):
+            break
+        new_cause = next(c for c in best.causes if c not in chosen)
+        steps.append({"cause": new_cause, "gain": 1 - best.cost / current.cost, "delta_bic": current.bic - best.bic,
+                      "cost": best.cost, "total_gain": 1 - best.cost / baseline.cost,
+                      "model": best.structure + ("; " if best.structure and best.effects else "")
+                      + ", ".join(e.label for e in best.effects)})
+        chosen.append(new_cause)
+        current = best
+        _log(f"step {len(chosen)}: {new_cause} (gain {steps[-1]['gain']:.3f}, dBIC {steps[-1]['delta_bic']:.1f})",
+             progress)
+        remaining = [c for c in pool if c not in chosen]
+        pool = {}
+        if len(chosen) >= max_causes or current.cost <= NOISE_MARGIN * floor["cost"]:
             continue
-        results.append(res)
-        _log(f"{ext.cause}: cost {res.cost:.4g}, gain {1 - res.cost / baseline.cost:.3f}, "
-             f"dBIC {baseline.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
-    # ---- selection: lowest BIC among the fits that reproduce the measured resonance count
-    target_count = _parallel_count(f, data)
-    matching = [r for r in results if _parallel_count(f, r.predicted) == target_count]
-    pool = matching if matching and _parallel_count(f, baseline.predicted) != target_count else results
-    best = min(pool, key=lambda r: r.bic) if pool else None
-    chosen = None
-    if best is not None and significant(baseline.bic, baseline.cost, best.bic, best.cost, min_delta_bic, min_gain):
-        chosen = best
-    diag = Diagnosis(chosen.cause if chosen else "none", baseline, chosen, results, f, data)
+        for cause in remaining:
+            t = time.perf_counter()
+            res = _extend(ctx, current, cause, results[cause], variants_tried.get(cause, []))
+            if res is None or res.cost >= current.cost:
+                continue
+            pool[cause] = res
+            _log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.cost / current.cost:.3f}, "
+                 f"dBIC {current.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
+
+    # ---- backward check: a cause made redundant by those named after it is dropped
+    if len(chosen) > 1:
+        n_named = len(chosen)
+        current, chosen, steps = _drop_redundant(ctx, current, chosen, steps, min_delta_bic, progress)
+        if len(chosen) < n_named:  # the order forward selection gives the causes kept: by their single fits
+            chosen.sort(key=lambda c: results[c].bic)
+
+    extended = current if chosen else None
+    cands = sorted(results.values(), key=lambda r: r.bic)
+    diag = Diagnosis(chosen[0] if chosen else "none", baseline, extended, cands, f, data, causes=chosen, steps=steps,
+                     noise=floor, failed=failed)
+    final = extended or baseline
+    diag.unexplained = unexplained_bands(f, final.errors, floor["per_response"])
     diag.evidence = {
         "baseline_model": model.name,
         "localisation": localise(f, data, baseline.errors),
         "resonances": resonance_comparison(f, data, baseline.predicted),
         "bands_before": band_table(f, baseline.errors),
-        "bands_after": band_table(f, chosen.errors) if chosen else [],
-        "gain_per_response": ({n: 1 - float(np.mean(np.abs(chosen.errors[n]) ** 2) / np.mean(np.abs(baseline.errors[n]) ** 2))
-                               for n in data} if chosen else {}),
-        "criterion": (f"lowest BIC among the fits that reproduce the measured number of parallel resonances "
-                      f"({target_count}) when the baseline does not; named only if dBIC >= {min_delta_bic} "
-                      f"and gain >= {min_gain}"),
+        "bands_after": band_table(f, extended.errors) if extended else [],
+        "gain_per_response": ({n: 1 - float(np.mean(np.abs(extended.errors[n]) ** 2) / np.mean(np.abs(baseline.errors[n]) ** 2))
+                               for n in data} if extended else {}),
+        "criterion": (f"forward selection by BIC: a cause is named if dBIC >= {min_delta_bic} and it removes at least "
+                      f"{min_gain} (first cause) or {min_step_gain} (further causes) of the cost left; stop at "
+                      f"{NOISE_MARGIN} x the noise floor"),
     }
-    if chosen is not None:
-        diag.realisation = _realise(chosen, fitted_model, f)
+    if extended is not None:
+        diag.realisation = realise_extended(extended, configs, f)
     diag.wall_s = time.perf_counter() - t0
-    _log(f"cause: {diag.cause} (gain {diag.gain:.3f}) in {diag.wall_s:.1f} s", progress)
+    _log(f"causes: {', '.join(chosen) or 'none'} (gain {diag.gain:.3f}) in {diag.wall_s:.1f} s", progress)
     return diag
 
 
-def _parallel_count(f: np.ndarray, responses: Mapping[str, np.ndarray]) -> int:
-    """Parallel resonances summed over the impedance responses."""
-    return sum(count_parallel(find_resonances(f, v)) for k, v in responses.items() if k.startswith("Z"))
+# ============================================================================== fitting causes
+def _effect_starts(ctx: _Context, fit: FrequencyFit, effect: Effect) -> list[dict[str, float]] | None:
+    if isinstance(effect, CoreLoss):
+        return effect.starts(fit.circuit, fit.circuit.resolve(check=False), ctx.scale, float(ctx.f[0]), float(ctx.f[-1]))
+    return None
 
 
-def _fit_missing_section(ext: MissingSection, values: Mapping[str, float], f: np.ndarray,
-                         data: Mapping[str, np.ndarray], fixed: tuple[str, ...]) -> FitResult | None:
+def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top: int = 2
+               ) -> tuple[FitResult | None, list[Effect]]:
+    """Every form and group of ``cause``: effect-only fits from the start grids, then the best ``top`` in full."""
+    circuit = base.fitted_circuit()
+    groups = winding_groups(circuit, configuration_ports(ctx.configs), group_names(ctx.configs))
+    variants = effect_variants(cause, groups, circuit, float(ctx.f[0]), ctx.one_port, ctx.scale, float(ctx.f[-1]))
+    screened = []
+    for eff in variants:
+        fit = ctx.fit(circuit, [eff])
+        pre = fit.fit([_effect_starts(ctx, fit, eff)], circuit_free=False, max_nfev=40, keep_starts=2)
+        screened.append((pre.cost, eff, fit, pre))
+    screened.sort(key=lambda t: t[0])
     best = None
-    family = ext.model.family if ext.model else ()
+    for i, (cost, eff, fit, pre) in enumerate(screened[:top]):
+        if i and best.cost < must_beat and cost > 2 * screened[0][0]:
+            break  # a clearly worse variant is not refined
+        res = fit.fit([_effect_starts(ctx, fit, eff)], x0s=pre.x[None], keep_starts=1, must_beat=must_beat,
+                      max_nfev=50, tol=1e-6)
+        if best is None or res.cost < best.cost:
+            best = res
+    return best, [t[1] for t in screened]
+
+
+def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effect], must_beat: float,
+                         top: int = 2) -> FitResult | None:
+    """Every split and end addition: the new elements fitted alone first, the best ``top`` then in full.
+
+    With ``effects`` (causes already named) their fitted parameters start
+    every fit and stay free.
+    """
+    circuit = base.fitted_circuit()
+    ports = configuration_ports(ctx.configs)
+    tail = base.x[current_nc(base):] if effects else np.zeros(0)
     staged = []
-    for circuit, _added in ext.candidates(values):
-        if family and family[0] == "two-winding":
-            configs = list(ext.model.configurations.values())
-        else:
-            configs = [Configuration("default", "n1", (), (Response("Zin"),))]
-        try:  # a short fit from every start, then the best two refined
-            first = FrequencyFit(circuit, configs, f, data, fixed).fit(max_nfev=60, cause="missing-section")
-        except DiagnosisError:
+    for cand in section_candidates(circuit, ports):
+        try:
+            whole = ctx.fit(cand.circuit, effects)
+            new = {n.lower() for n in cand.new_elements}
+            first = ctx.fit(cand.circuit, effects, fixed=[n for n in whole.free if n.lower() not in new])
+        except (DiagnosisError, ValueError):
             continue
-        staged.append((first.cost, circuit.with_values(first.values), configs))
+        r = first.fit(x0s=np.concatenate([np.zeros(first.nc), tail])[None], grid=False, max_nfev=15, tol=1e-5)
+        staged.append((r.cost, cand, r))
     staged.sort(key=lambda t: t[0])
-    for _, circuit, configs in staged[:2]:
-        res = FrequencyFit(circuit, configs, f, data, fixed).fit(max_nfev=300, cause="missing-section")
+    best = None
+    for i, (_, cand, first) in enumerate(staged):
+        if i >= top and (best is not None and best.cost < must_beat or i >= top + 3):
+            break
+        fit = ctx.fit(cand.circuit.with_values(first.values), effects)
+        res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), first.x[current_nc(first):]])[None], grid=False,
+                      max_nfev=60, tol=1e-6)
+        res.structure = cand.how
+        res.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"] if effects else \
+            ["missing-section"]
+        res.cause = "+".join(res.causes)
         if best is None or res.cost < best.cost:
             best = res
     return best
 
 
-def _realise(chosen: FitResult, model: Model, f: np.ndarray) -> dict[str, Any]:
-    """Time-domain realisation of the extension (ladders) and how closely it follows the formula fit."""
-    exts = {e.cause: e for e in frequency_extensions(model, f[0], f[-1])}
-    ext: Extension | None = exts.get(chosen.cause)
-    if ext is None or isinstance(ext, MissingSection):
-        return {"kind": "circuit", "elements": len(chosen.circuit.elements), "note": "a plain R-L-C-K circuit"}
-    circuit = chosen.circuit.with_values(chosen.values)
-    values = circuit.resolve(check=False)
-    ladder = ext.realise(circuit, values, chosen.extra, float(f[0]), float(f[-1]))
-    configs = list(model.configurations.values())
-    fit = FrequencyFit(ladder, configs, f, {n: chosen.predicted[n] for n in chosen.predicted})
-    pred = fit.predict(np.zeros(len(fit.free)))
-    dev = max(float(np.max(np.abs(20 * np.log10(np.abs(pred[n] / chosen.predicted[n]))))) for n in pred)
-    return {"kind": "ladder", "elements": len(ladder.elements), "max_deviation_db": dev,
-            "note": "frequency-dependent elements realised as passive R-L ladders (simulable, FMU-ready)",
-            "circuit": ladder}
+def _polish_baseline(ctx: _Context, baseline: FitResult, fits, progress: bool) -> FitResult:
+    """Refit the baseline from each candidate's circuit values (same structure); keep the best baseline."""
+    best = baseline
+    for r in sorted(fits, key=lambda r: r.cost):
+        if r.structure or _topology(r.circuit) != _topology(baseline.circuit):
+            continue
+        trial = ctx.fit(baseline.circuit.with_values(r.values)).fit(max_nfev=80, tol=1e-8)
+        if trial.cost < best.cost * (1 - 1e-6):
+            best = trial
+    if best is not baseline:
+        best.wall_s += baseline.wall_s
+        _log(f"baseline refitted from a candidate's values: cost {baseline.cost:.4g} -> {best.cost:.4g}", progress)
+    return best
+
+
+def _single_causes(ctx: _Context, todo: Sequence[str], baseline: FitResult, progress: bool
+                   ) -> tuple[dict[str, FitResult], list[dict[str, Any]], dict[str, list[Effect]]]:
+    """Each cause fitted alone with the baseline's values; the fits that end above the baseline are failed."""
+    results: dict[str, FitResult] = {}
+    failed: list[dict[str, Any]] = []
+    variants_tried: dict[str, list[Effect]] = {}
+    for cause in todo:
+        t = time.perf_counter()
+        if cause == "missing-section":
+            res = _fit_missing_section(ctx, baseline, [], must_beat=baseline.cost)
+        else:
+            res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.cost)
+            variants_tried[cause] = variants
+        if res is None:
+            continue
+        if res.cost >= baseline.cost:
+            failed.append({"cause": cause, "cost": res.cost, "reason": "every start ended at or above the baseline cost"})
+            _log(f"{cause}: failed (cost {res.cost:.4g} >= baseline {baseline.cost:.4g})", progress)
+            continue
+        results[cause] = res
+        _log(f"{cause}: {res.structure or res.effects[0].label}: cost {res.cost:.4g}, gain "
+             f"{1 - res.cost / baseline.cost:.3f}, dBIC {baseline.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)",
+             progress)
+    return results, failed, variants_tried
+
+
+def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps: list[dict[str, Any]],
+                    min_delta_bic: float, progress: bool) -> tuple[FitResult, list[str], list[dict[str, Any]]]:
+    """Refit without each named effect in turn (warm start); drop it when the BIC does not worsen by ``min_delta_bic``.
+
+    Structural causes (a missing section) and effects that added an element are kept.
+    """
+    changed = True
+    while changed and len(current.effects) > 1:
+        changed = False
+        nc = current_nc(current)
+        offsets = np.cumsum([0] + [len(e.parameters) for e in current.effects])
+        for j, eff in enumerate(current.effects):
+            if eff.cause == "missing-section" or (eff.cause == "core-loss" and current.circuit.has_element("Rcore")):
+                continue
+            keep = [e for i, e in enumerate(current.effects) if i != j]
+            tail = np.concatenate([current.x[nc + offsets[i]: nc + offsets[i + 1]]
+                                   for i in range(len(current.effects)) if i != j])
+            fit = ctx.fit(current.fitted_circuit(), keep)
+            res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
+            if res.bic - current.bic < min_delta_bic:
+                res.structure = current.structure
+                res.causes = [c for c in current.causes if c != eff.cause]
+                res.cause = "+".join(res.causes)
+                _log(f"{eff.cause} dropped: redundant once {', '.join(res.causes)} are in the model "
+                     f"(dBIC {current.bic - res.bic:.1f})", progress)
+                steps = steps + [{"cause": eff.cause, "dropped": True, "delta_bic": current.bic - res.bic,
+                                  "cost": res.cost, "gain": 1 - res.cost / current.cost}]
+                chosen = [c for c in chosen if c != eff.cause]
+                current = res
+                changed = True
+                break
+    return current, chosen, steps
+
+
+def _topology(circuit: Circuit) -> list[tuple[str, str, tuple[str, ...]]]:
+    """Element names, kinds and nodes (values left out)."""
+    return [(e.name.lower(), e.kind, tuple(e.nodes)) for e in circuit.elements]
+
+
+def _extend(ctx: _Context, current: FitResult, cause: str, single: FitResult, variants: Sequence[Effect]
+            ) -> FitResult | None:
+    """``current`` plus ``cause``, warm-started from ``current`` and from the cause's own single fit."""
+    if cause == "missing-section":
+        return _fit_missing_section(ctx, current, current.effects, must_beat=current.cost)
+    circuit = current.fitted_circuit()
+    order = [single.effects[0]] + [v for v in variants if v.label != single.effects[0].label][:1]
+    cur_tail = list(current.x[current_nc(current):])
+    best = None
+    for eff in order:
+        fit = ctx.fit(circuit, list(current.effects) + [eff])
+        grid = (_effect_starts(ctx, fit, eff) or
+                [dict(zip([p.name for p in eff.parameters], vals)) for vals in itertools.product(
+                    *[p.starts or (np.sqrt(p.lower * p.upper),) for p in eff.parameters])])
+        tails = [[np.log(g[p.name]) if p.log else g[p.name] for p in eff.parameters] for g in grid]
+        if eff is single.effects[0]:
+            tails.insert(0, list(single.x[current_nc(single):]))
+        x0s = np.array([[0.0] * fit.nc + cur_tail + t for t in tails])
+        pre = fit.fit(x0s=x0s, grid=False, circuit_free=False, max_nfev=40, keep_starts=2)
+        res = fit.fit(x0s=pre.x[None], grid=False, keep_starts=1, max_nfev=50, must_beat=current.cost, tol=1e-6)
+        res.structure = current.structure
+        res.causes = list(current.causes) + [cause]
+        res.cause = "+".join(res.causes)
+        if best is None or res.cost < best.cost:
+            best = res
+    return best
+
+
+def current_nc(r: FitResult) -> int:
+    """Number of circuit values in a fit's parameter vector."""
+    return r.x.size - sum(len(e.parameters) for e in r.effects)
 
 
 def load_baseline(model_name: str | None) -> Model | None:

@@ -67,3 +67,77 @@ def localise(f: np.ndarray, measured: Mapping[str, np.ndarray], errors: Mapping[
     total = sum(energy.values()) or 1.0
     shares = {k: v / total for k, v in energy.items()}
     return {"region": max(shares, key=lambda k: shares[k]), "shares": shares}
+
+
+def noise_variance(f: np.ndarray, h: np.ndarray) -> float:
+    """Variance ``E|n|^2`` of the complex log noise of one measured response, estimated from the data.
+
+    The third difference of ``ln H`` along frequency removes any smooth
+    response (quadratic in the index) and leaves ``20`` times the noise
+    variance; its median (robust against the few points at sharp resonances)
+    over ``ln 2`` gives the mean of the exponentially distributed ``|d|^2``.
+    """
+    y = np.log(np.abs(h)) + 1j * np.unwrap(np.angle(h))
+    if y.size < 8:
+        return 0.0
+    d = y[3:] - 3 * y[2:-1] + 3 * y[1:-2] - y[:-3]
+    return float(np.median(np.abs(d) ** 2) / (20 * np.log(2)))
+
+
+def noise_floor(f: np.ndarray, measured: Mapping[str, np.ndarray]) -> dict[str, object]:
+    """The cost a perfect model would still have: the sum over responses of the noise variances.
+
+    Returns
+    -------
+    dict
+        ``cost`` (same units as the diagnosis cost), ``per_response`` noise RMS
+        (complex log units: 0.01 is 1 % / 0.57 deg), ``method``.
+    """
+    per = {n: noise_variance(f, v) for n, v in measured.items()}
+    return {"cost": float(sum(per.values())), "per_response": {n: float(np.sqrt(v)) for n, v in per.items()},
+            "method": "median of |third difference of ln H|^2 / (20 ln 2) per response"}
+
+
+def unexplained_bands(f: np.ndarray, errors: Mapping[str, np.ndarray], noise_rms: Mapping[str, float],
+                      per_decade: float = 6.0, factor: float = 4.0, max_bands: int = 8) -> list[dict[str, object]]:
+    """Frequency bands where the residual still stands above the noise.
+
+    The residual is averaged over a sliding window of ``1/per_decade``
+    decade (at least 5 points); where the average exceeds ``factor`` times
+    the noise of such an average (``sigma / sqrt(w)``) and the residual's
+    own RMS exceeds twice the noise RMS, the point is systematic. Adjacent
+    points join into bands (gaps under half a window bridged); bands of
+    fewer than a window are dropped.
+
+    Returns
+    -------
+    list of dict
+        Largest first: ``response``, ``band_hz``, ``rms`` (complex log),
+        ``mag_rms_db``, ``phase_rms_deg``, ``noise_rms``, ``above_noise`` (rms / noise).
+    """
+    n_dec = np.log10(f[-1] / f[0]) if f.size > 1 else 1.0
+    w = max(5, int(round(f.size / max(n_dec, 1e-9) / per_decade)))
+    kernel = np.ones(w) / w
+    bands = []
+    for name, e in errors.items():
+        sigma = max(float(noise_rms.get(name, 0.0)), 1e-12)
+        if e.size < w:
+            continue
+        smooth = np.convolve(e, kernel, mode="same")
+        local = np.sqrt(np.convolve(np.abs(e) ** 2, kernel, mode="same"))
+        hot = (np.abs(smooth) > factor * sigma / np.sqrt(w)) & (local > 2 * sigma)
+        idx = np.flatnonzero(hot)
+        if idx.size == 0:
+            continue
+        groups = np.split(idx, np.flatnonzero(np.diff(idx) > max(1, w // 2)) + 1)
+        for g in groups:
+            if g[-1] - g[0] + 1 < w:
+                continue
+            seg = e[g[0]: g[-1] + 1]
+            rms = float(np.sqrt(np.mean(np.abs(seg) ** 2)))
+            bands.append({"response": name, "band_hz": [float(f[g[0]]), float(f[g[-1]])], "rms": rms,
+                          "mag_rms_db": float(20 / np.log(10) * np.sqrt(np.mean(seg.real ** 2))),
+                          "phase_rms_deg": float(np.degrees(np.sqrt(np.mean(seg.imag ** 2)))),
+                          "noise_rms": sigma, "above_noise": rms / sigma})
+    bands.sort(key=lambda b: -b["rms"] ** 2 * (b["band_hz"][1] / b["band_hz"][0]))
+    return bands[:max_bands]

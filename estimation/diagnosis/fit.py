@@ -1,4 +1,4 @@
-"""Least-squares fits of a circuit (and an extension) to measured frequency responses.
+"""Least-squares fits of a circuit (and any effects of the catalogue) to measured frequency responses.
 
 The residual of response ``r`` at frequency ``f_k`` is the complex log error
 ``e = ln(H_model / H_measured)``: its real part is the log-magnitude error,
@@ -7,15 +7,20 @@ that it counts equally whatever its number of points; the cost is
 ``sum_r mean_k |e_rk|^2`` (dimensionless).
 
 Circuit values are fitted in log scale relative to their starting values
-(positive by construction); couplings stay at their baseline values, which
+(positive by construction); couplings stay at their starting values, which
 keeps the inductance matrix positive definite whatever the fit does to the
 self-inductances.
+
+Speed: responses come from the pole-residue form of the constant circuit
+with the effects closed around it (:mod:`.network`); a batch of parameter
+vectors shares one eigen-decomposition per distinct set of circuit values,
+so the Jacobian columns of the effects' own parameters (and a fit of those
+alone, :meth:`FrequencyFit.fit` with ``circuit_free=False``) need none.
 """
 
 from __future__ import annotations
 
 import time
-import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -23,11 +28,10 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from pris_cosim.circuit import Circuit
-from pris_cosim.errors import NonPassiveWarning
-from pris_cosim.frf import ResponseModel
 from pris_cosim.models import Configuration
 
-from .catalogue import Extension
+from .catalogue import Effect, Groups, winding_groups
+from .network import ProbedConfiguration
 
 
 class DiagnosisError(ValueError):
@@ -42,7 +46,7 @@ def bic(rss: float, n_residuals: int, n_params: int) -> float:
 
 def significant(baseline_bic: float, baseline_cost: float, bic_: float, cost: float,
                 min_delta_bic: float, min_gain: float) -> bool:
-    """The naming rule: an extension counts only if it beats the baseline's BIC and removes enough cost."""
+    """The naming rule: an extension counts only if it beats the reference BIC and removes enough cost."""
     return baseline_bic - bic_ >= min_delta_bic and 1 - cost / baseline_cost >= min_gain
 
 
@@ -53,25 +57,33 @@ class FitResult:
     Attributes
     ----------
     cause : str
-        ``none`` for the baseline, else the extension's cause.
+        ``none`` for the baseline, else the causes joined by ``+``.
     circuit : Circuit
         The circuit that was fitted (with structural changes).
     values : dict
         Fitted free values (name -> SI value).
     extra : dict
-        Fitted extension parameters.
+        Fitted effect parameters (of the one effect; by cause when several).
     cost : float
         ``sum_r mean_k |e_rk|^2``.
     rss, n_residuals, n_params : float, int, int
         Unweighted residual sum of squares and counts, for the information criterion.
     predicted, errors : dict
         Model responses and complex log errors per response name.
+    causes : list of str
+        The causes in the model, in the order added.
+    effects : list of Effect
+        The fitted effects (form and group included).
+    params : list of dict
+        Parameters of each effect.
+    structure : str
+        How the circuit was changed (missing section), else empty.
     """
 
     cause: str
     circuit: Circuit
     values: dict[str, float]
-    extra: dict[str, float]
+    extra: dict
     cost: float
     rss: float
     n_residuals: int
@@ -80,11 +92,25 @@ class FitResult:
     errors: dict[str, np.ndarray] = field(repr=False)
     nfev: int = 0
     wall_s: float = 0.0
+    causes: list[str] = field(default_factory=list)
+    effects: list[Effect] = field(default_factory=list, repr=False)
+    params: list[dict[str, float]] = field(default_factory=list)
+    structure: str = ""
+    x: np.ndarray = field(default=None, repr=False)
 
     @property
     def bic(self) -> float:
         """Bayesian information criterion ``N ln(RSS/N) + k ln N``."""
         return bic(self.rss, self.n_residuals, self.n_params)
+
+    def fitted_circuit(self) -> Circuit:
+        """The fitted circuit (constant values; effects not applied)."""
+        return self.circuit.with_values(self.values)
+
+    def describe(self) -> list[dict]:
+        """Per effect: cause, form, group and formula with the fitted values."""
+        return [{"cause": e.cause, "form": e.form, "group": e.group, "label": e.label, "parameters": p,
+                 "formula": e.formula(p)} for e, p in zip(self.effects, self.params)]
 
 
 def coupling_names(circuit: Circuit) -> set[str]:
@@ -101,8 +127,24 @@ def coupling_names(circuit: Circuit) -> set[str]:
     return names - used_by_rlc
 
 
+def group_names(configurations: Sequence[Configuration]) -> dict[str, str]:
+    """Port node to winding group: ``lv`` / ``hv`` from the configuration names, else the node."""
+    out: dict[str, str] = {}
+    for cfg in configurations:
+        name = cfg.name.upper()
+        if name.startswith("LV"):
+            out.setdefault(cfg.port, "lv")
+        elif name.startswith("HV"):
+            out.setdefault(cfg.port, "hv")
+    return out
+
+
+def configuration_ports(configurations: Sequence[Configuration]) -> list[str]:
+    return list(dict.fromkeys(cfg.port for cfg in configurations))
+
+
 class FrequencyFit:
-    """Fit a circuit's free values (plus an extension's parameters) to measured responses.
+    """Fit a circuit's free values (plus the effects' parameters) to measured responses.
 
     Parameters
     ----------
@@ -114,7 +156,10 @@ class FrequencyFit:
         Response name to complex values on ``frequency_hz``.
     fixed : sequence of str
         Names kept at their values (besides every coupling).
-    extension : Extension, optional
+    effects : sequence of Effect
+        Frequency-dependent changes fitted with the circuit.
+    scale : float, Ohm
+        Typical impedance of the data (places added elements such as a core-loss resistor).
     """
 
     def __init__(
@@ -124,133 +169,251 @@ class FrequencyFit:
         frequency_hz: np.ndarray,
         measured: Mapping[str, np.ndarray],
         fixed: Sequence[str] = (),
-        extension: Extension | None = None,
+        effects: Sequence[Effect] = (),
+        scale: float = 1.0,
     ):
-        self.extension = extension
-        self.circuit = extension.prepare(circuit) if extension else circuit
+        self.effects = list(effects)
+        self.configurations = list(configurations)
+        self.ports = configuration_ports(self.configurations)
+        self.names = group_names(self.configurations)
+        groups = winding_groups(circuit, self.ports, self.names)
+        for e in self.effects:
+            circuit = e.prepare(circuit, groups, scale)
+        self.circuit = circuit
+        self.groups: Groups = winding_groups(circuit, self.ports, self.names)
         self.f = np.asarray(frequency_hz, float)
+        self.s = 2j * np.pi * self.f
         self.measured = dict(measured)
-        self.models: list[ResponseModel] = []
+        self.branches: list[str] = []
+        for e in self.effects:
+            for b in e.branches(self.circuit, self.groups):
+                if b not in self.branches:
+                    self.branches.append(b)
+        self.index = {b.lower(): i for i, b in enumerate(self.branches)}
+        self.models: list[ProbedConfiguration] = []
         produced: list[str] = []
-        for cfg in configurations:
+        for cfg in self.configurations:
             wanted = [r for r in cfg.responses if r.name in self.measured]
             produced += [r.name for r in cfg.responses]
             if wanted:
-                self.models.append(ResponseModel(self.circuit, cfg.port, shorts=cfg.shorts, responses=wanted))
+                self.models.append(ProbedConfiguration(self.circuit, cfg.port, cfg.shorts, wanted, self.branches))
         unknown = [n for n in self.measured if n not in produced]
         if unknown:
             raise DiagnosisError(
                 f"measured response {unknown[0]!r} is not a response of the model (it has: {', '.join(produced)})"
             )
         fixed_keys = {n.lower() for n in fixed} | coupling_names(self.circuit)
+        for e in self.effects:
+            fixed_keys |= {n.lower() for n in e.fixed(self.circuit, self.groups)}
         self.free = [n for n in self.circuit.free_names() if n.lower() not in fixed_keys
                      and not (self.circuit.has_element(n) and self.circuit.element(n).kind == "K")]
         base = self.circuit.resolve(check=False)
         env = self.circuit.parameter_values()
         self.start = np.array([float(env[n.lower()]) if n.lower() in env else float(base[n.lower()]) for n in self.free])
-        self.extra = list(extension.parameters) if extension else []
+        self.extra = [(j, p) for j, e in enumerate(self.effects) for p in e.parameters]
+        self.nc = len(self.free)
         n_points = sum(self.f.size for _ in self.measured)
-        if self.f.size < 5 or n_points < 2 * (len(self.free) + len(self.extra)):
+        if self.f.size < 5 or n_points < 2 * (self.nc + len(self.extra)):
             raise DiagnosisError(
-                f"too few points: {self.f.size} frequencies for {len(self.free) + len(self.extra)} parameters"
+                f"too few points: {self.f.size} frequencies for {self.nc + len(self.extra)} parameters"
             )
+        self._cache: tuple[bytes, list[np.ndarray], dict] | None = None
 
     # ------------------------------------------------------------------ model
     def overrides(self, x: np.ndarray) -> dict[str, float]:
-        return {n: float(v) for n, v in zip(self.free, self.start * np.exp(x[: len(self.free)]))}
+        return {n: float(v) for n, v in zip(self.free, self.start * np.exp(x[: self.nc]))}
 
-    def extra_values(self, x: np.ndarray) -> dict[str, float]:
-        tail = x[len(self.free):]
-        return {p.name: float(np.exp(v) if p.log else v) for p, v in zip(self.extra, tail)}
+    def effect_params(self, X: np.ndarray) -> list[dict[str, np.ndarray]]:
+        """Per effect, its parameters as arrays over the rows of ``X``."""
+        out: list[dict[str, np.ndarray]] = [dict() for _ in self.effects]
+        for col, (j, p) in enumerate(self.extra):
+            v = X[:, self.nc + col]
+            out[j][p.name] = np.exp(v) if p.log else v
+        return out
 
-    def predict(self, x: np.ndarray) -> dict[str, np.ndarray]:
-        """Model responses for one parameter vector (log-ratio base values, then extension parameters)."""
-        return {k: v[0] for k, v in self.predict_batch(np.atleast_2d(x)).items()}
+    def extra_values(self, x: np.ndarray) -> list[dict[str, float]]:
+        return [{k: float(v[0]) for k, v in d.items()} for d in self.effect_params(np.atleast_2d(x))]
+
+    def _transfer(self, Xc: np.ndarray) -> tuple[list[np.ndarray], dict]:
+        key = Xc.tobytes()
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1], self._cache[2]
+        over = {n: self.start[i] * np.exp(Xc[:, i]) for i, n in enumerate(self.free)}
+        values = self.circuit.resolve(over, check=False)
+        T = [m.transfer(values, self.s) for m in self.models]
+        if Xc.shape[0] == 1:
+            self._cache = (key, T, values)
+        return T, values
 
     def predict_batch(self, X: np.ndarray) -> dict[str, np.ndarray]:
         """Model responses for a population of parameter vectors, shape ``(P, F)`` per response."""
+        X = np.atleast_2d(np.asarray(X, float))
         P, F = X.shape[0], self.f.size
-        over = {n: self.start[i] * np.exp(X[:, i]) for i, n in enumerate(self.free)}
+        uniq, inv = np.unique(X[:, : self.nc], axis=0, return_inverse=True)
+        inv = np.ravel(inv)
+        T, values = self._transfer(uniq)
+        if uniq.shape[0] != P or np.any(inv != np.arange(P)):  # np.unique sorts the rows: back to X's order
+            T = [t[inv] for t in T]
+            values = {k: (np.asarray(v)[inv] if np.ndim(v) else v) for k, v in values.items()}
+        params = self.effect_params(X)
+        dz = None
+        if self.branches:
+            k = len(self.branches)
+            dz = np.zeros((P, F, k, k), complex)
+            for e, p in zip(self.effects, params):
+                for names, block in e.branch_changes(self.circuit, self.groups, values, self.f, p):
+                    idx = [self.index[n.lower()] for n in names]
+                    dz[:, :, np.array(idx)[:, None], np.array(idx)[None, :]] += block
+        port_effects = [(e, p) for e, p in zip(self.effects, params) if type(e).port_map is not Effect.port_map]
+
+        def port_map(z):
+            for e, p in port_effects:
+                z = e.port_map(z, self.f, p)
+            return z
+
         out: dict[str, np.ndarray] = {}
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NonPassiveWarning)
-            if self.extension is not None and self.extra:
-                tail = X[:, len(self.free):]
-                extra = {p.name: (np.exp(tail[:, j]) if p.log else tail[:, j])[:, None] for j, p in enumerate(self.extra)}
-                values = self.circuit.resolve(over, check=False)
-                values = {k: (np.asarray(v)[:, None] if np.ndim(v) else v) for k, v in values.items()}
-                pf = self.extension.per_frequency(self.circuit, values, self.f[None, :], extra)
-                pf = {k: np.broadcast_to(v, (P, F)) for k, v in pf.items()}
-                for m in self.models:
-                    out.update(m.evaluate_grid(self.f, over, pf))
-            else:
-                for m in self.models:
-                    res = m.evaluate(self.f, over)
-                    out.update({k: np.broadcast_to(v, (P, F)) for k, v in res.items()})
-        return out
+        for m, t in zip(self.models, T):
+            out.update(m.responses_from(t, dz, port_map if port_effects else None))
+        return {k: np.broadcast_to(v, (P, F)) for k, v in out.items()}
+
+    def predict(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """Model responses for one parameter vector (log-ratio circuit values, then effect parameters)."""
+        return {k: v[0] for k, v in self.predict_batch(np.atleast_2d(x)).items()}
 
     def errors(self, predicted: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        return {n: np.log(predicted[n] / self.measured[n]) for n in self.measured}
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return {n: np.log(predicted[n] / self.measured[n]) for n in self.measured}
 
     def residuals_batch(self, X: np.ndarray) -> np.ndarray:
         """Weighted residual vectors, shape ``(P, n_residuals)``."""
         pred = self.predict_batch(X)
         parts = []
-        for n, meas in self.measured.items():
-            e = np.log(pred[n] / meas)
-            parts.append(np.concatenate([e.real, e.imag], axis=1) / np.sqrt(2 * meas.size))
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            for n, meas in self.measured.items():
+                e = np.log(pred[n] / meas)
+                parts.append(np.concatenate([e.real, e.imag], axis=1) / np.sqrt(2 * meas.size))
         r = np.concatenate(parts, axis=1)
         return np.where(np.isfinite(r), r, 1e3)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         return self.residuals_batch(np.atleast_2d(x))[0]
 
-    def jacobian(self, x: np.ndarray, step: float = 1e-6) -> np.ndarray:
-        """Forward-difference Jacobian, all perturbed vectors evaluated as one batch."""
-        X = np.vstack([x, x + step * np.eye(x.size)])
+    def jacobian(self, x: np.ndarray, step: float = 1e-6, columns: np.ndarray | None = None) -> np.ndarray:
+        """Forward-difference Jacobian, all perturbed vectors evaluated as one batch.
+
+        Columns of the effects' parameters share the unperturbed circuit's
+        pole-residue form (no new eigen-decomposition).
+        """
+        cols = np.arange(x.size) if columns is None else columns
+        X = np.vstack([x, x + step * np.eye(x.size)[cols]])
         R = self.residuals_batch(X)
         return (R[1:] - R[0]).T / step
 
     # ------------------------------------------------------------------ fitting
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo = [-np.log(100.0)] * len(self.free) + [np.log(p.lower) if p.log else p.lower for p in self.extra]
-        hi = [np.log(100.0)] * len(self.free) + [np.log(p.upper) if p.log else p.upper for p in self.extra]
+        lo = [-np.log(100.0)] * self.nc + [np.log(p.lower) if p.log else p.lower for _, p in self.extra]
+        hi = [np.log(100.0)] * self.nc + [np.log(p.upper) if p.log else p.upper for _, p in self.extra]
         return np.array(lo), np.array(hi)
 
-    def fit(self, extra_starts: Sequence[Mapping[str, float]] | None = None, max_nfev: int = 100,
-            cause: str | None = None, keep_starts: int = 3) -> FitResult:
-        """Fit from the most promising starts (extension parameter guesses, screened in one batch); keep the best."""
+    def start_vectors(self, extra_starts: Sequence[Sequence[Mapping[str, float]]] | None = None) -> np.ndarray:
+        """Start vectors: the circuit at its values and every combination of the effects' start values.
+
+        ``extra_starts``: per effect a list of parameter dicts (default: each
+        effect's grid of ``starts``).
+        """
+        per_effect = []
+        for j, e in enumerate(self.effects):
+            given = extra_starts[j] if extra_starts is not None and j < len(extra_starts) and extra_starts[j] else None
+            if given is None:
+                grids = np.meshgrid(*[p.starts for p in e.parameters], indexing="ij")
+                given = [{p.name: float(g.flat[i]) for p, g in zip(e.parameters, grids)} for i in range(grids[0].size)]
+            per_effect.append([[np.log(s[p.name]) if p.log else s[p.name] for p in e.parameters] for s in given])
+        lo, hi = self.bounds()
+        rows = []
+        for combo in (np.array(np.meshgrid(*[np.arange(len(g)) for g in per_effect], indexing="ij")).reshape(
+                len(per_effect), -1).T if per_effect else [[]]):
+            tail = [v for j, i in enumerate(combo) for v in per_effect[j][i]]
+            rows.append(np.clip(np.concatenate([np.zeros(self.nc), tail]), lo + 1e-9, hi - 1e-9))
+        return np.array(rows)
+
+    def fit(self, extra_starts: Sequence[Sequence[Mapping[str, float]]] | None = None, max_nfev: int = 100,
+            cause: str | None = None, keep_starts: int = 3, circuit_free: bool = True,
+            x0s: np.ndarray | None = None, must_beat: float | None = None, tol: float = 1e-8,
+            grid: bool = True) -> FitResult:
+        """Fit from the most promising starts (screened in one batch); keep the best.
+
+        Parameters
+        ----------
+        extra_starts : per effect a list of parameter dicts, optional
+        max_nfev : int
+            Evaluations per local fit.
+        keep_starts : int
+            Local fits from the best screened starts.
+        circuit_free : bool
+            Fit the circuit values too (else only the effects' parameters).
+        x0s : numpy.ndarray, optional
+            Explicit start vectors (rows), screened with the others.
+        must_beat : float, optional
+            A fit that ends at or above this cost has failed: the next
+            screened starts are tried until one beats it or none is left.
+        grid : bool
+            Add the effects' start grids to ``x0s`` (always when no ``x0s``).
+        """
         t0 = time.perf_counter()
         lo, hi = self.bounds()
-        starts = list(extra_starts or [{}])
-        if self.extra and starts == [{}]:
-            grids = np.meshgrid(*[p.starts for p in self.extra], indexing="ij")
-            starts = [{p.name: float(g.flat[i]) for p, g in zip(self.extra, grids)} for i in range(grids[0].size)]
-        best = None
-        x0s = np.array([np.clip(np.concatenate([np.zeros(len(self.free)),
-                                                [np.log(s[p.name]) if p.log else s[p.name] for p in self.extra]]),
-                                lo + 1e-9, hi - 1e-9) for s in starts])
-        nfev = len(x0s)
-        if len(x0s) > keep_starts:  # screen all starts in one batch, fit from the most promising ones
-            r = self.residuals_batch(x0s)
-            x0s = x0s[np.argsort(np.sum(r * r, axis=1))[:keep_starts]]
-        for x0 in x0s:
-            sol = least_squares(self.residuals, x0, jac=self.jacobian, bounds=(lo, hi), x_scale="jac",
-                                max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
-            nfev += sol.nfev
-            if best is None or sol.cost < best.cost:
-                best = sol
-        assert best is not None
-        pred = self.predict(best.x)
+        if x0s is None or grid:
+            starts = self.start_vectors(extra_starts)
+            if x0s is not None:
+                starts = np.vstack([np.atleast_2d(x0s), starts])
+        else:
+            starts = np.atleast_2d(np.asarray(x0s, float))
+        starts = np.clip(starts, lo + 1e-9, hi - 1e-9)
+        nfev = len(starts)
+        order = np.arange(len(starts))
+        if len(starts) > 1:
+            r = self.residuals_batch(starts)
+            order = np.argsort(np.sum(r * r, axis=1))
+        free_idx = np.arange(lo.size) if circuit_free else np.arange(self.nc, lo.size)
+        best_x, best_cost = None, np.inf
+        for rank, i in enumerate(order):
+            if rank >= keep_starts and (must_beat is None or best_cost < must_beat):
+                break
+            x_full = starts[i].copy()
+            if free_idx.size:
+                def fun(z, x_full=x_full):
+                    x = x_full.copy()
+                    x[free_idx] = z
+                    return self.residuals(x)
+
+                def jac(z, x_full=x_full):
+                    x = x_full.copy()
+                    x[free_idx] = z
+                    return self.jacobian(x, columns=free_idx)
+
+                sol = least_squares(fun, x_full[free_idx], jac=jac, bounds=(lo[free_idx], hi[free_idx]),
+                                    x_scale="jac", max_nfev=max_nfev, xtol=tol, ftol=tol)
+                nfev += sol.nfev
+                x_full[free_idx] = sol.x
+            cost = float(np.sum(self.residuals(x_full) ** 2))
+            if cost < best_cost:
+                best_x, best_cost = x_full, cost
+        assert best_x is not None
+        return self.result(best_x, cause, nfev, time.perf_counter() - t0)
+
+    def result(self, x: np.ndarray, cause: str | None = None, nfev: int = 0, wall: float = 0.0) -> FitResult:
+        pred = self.predict(x)
         err = self.errors(pred)
+        err = {k: np.where(np.isfinite(v), v, 1e3) for k, v in err.items()}
         cost = float(sum(np.mean(np.abs(v) ** 2) for v in err.values()))
         rss = float(sum(np.sum(np.abs(v) ** 2) for v in err.values()))
         n_res = int(sum(2 * v.size for v in err.values()))
+        params = self.extra_values(x)
+        causes = [e.cause for e in self.effects]
+        extra = params[0] if len(params) == 1 else {e.cause: p for e, p in zip(self.effects, params)}
         return FitResult(
-            cause=cause or (self.extension.cause if self.extension else "none"),
-            circuit=self.circuit,
-            values=self.overrides(best.x),
-            extra=self.extra_values(best.x),
-            cost=cost, rss=rss, n_residuals=n_res, n_params=len(self.free) + len(self.extra),
-            predicted=pred, errors=err, nfev=nfev, wall_s=time.perf_counter() - t0,
+            cause=cause or ("+".join(causes) if causes else "none"),
+            circuit=self.circuit, values=self.overrides(x), extra=extra,
+            cost=cost, rss=rss, n_residuals=n_res, n_params=self.nc + len(self.extra),
+            predicted=pred, errors=err, nfev=nfev, wall_s=wall, causes=causes, effects=list(self.effects),
+            params=params, x=np.asarray(x, float),
         )

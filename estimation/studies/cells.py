@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from ..parameters import ParameterSet
+from ..verdict import fisher_information  # noqa: F401  (the studies' Fisher information)
 
 #: A run succeeds when every parameter is within this many percent of the target.
 SUCCESS_PERCENT = 5.0
@@ -135,60 +135,3 @@ def aggregate(runs: Sequence[Mapping[str, Any]], key: Callable[[Mapping[str, Any
         row.pop("trace", None)
         rows.append(row)
     return rows
-
-
-def fisher_information(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
-                       values: Mapping[str, float], sigma: float, rel_step: float = 1e-4,
-                       limit_percent: float = SUCCESS_PERCENT) -> dict[str, Any]:
-    """Fisher information of the parameters (log scale) from the residual Jacobian at ``values``.
-
-    With white noise of standard deviation ``sigma`` on every residual,
-    ``F = J^T J / sigma^2`` where ``J[:, j] = d r / d ln(theta_j)`` (central
-    differences of relative size ``rel_step``); ``sqrt(diag(F^-1))`` bounds the
-    relative standard deviation of each parameter (Cramer-Rao).
-
-    Parameters
-    ----------
-    residuals : callable
-        ``residuals(U) -> (P, N)`` on unit-cube points.
-    params : ParameterSet
-    values : mapping
-        Physical values where the Jacobian is taken (the target).
-    sigma : float
-        Noise standard deviation, unit of the residuals.
-    limit_percent : float
-        Parameters whose bound exceeds this are reported as poorly determined.
-
-    Returns
-    -------
-    dict
-        ``relative_sd_percent`` {name: %}, ``relative_sensitivity`` {name:
-        column norm over the largest}, ``condition`` (of ``J``),
-        ``poorly_determined`` [names], ``sigma``.
-    """
-    names = list(params.varying)
-    pts = []
-    for k in names:
-        for s in (1 + rel_step, 1 - rel_step):
-            v = dict(values)
-            v[k] = values[k] * s
-            pts.append(params.to_unit({n: v[n] for n in names}))
-    R = np.asarray(residuals(np.array(pts)), float)
-    J = ((R[0::2] - R[1::2]) / (2 * rel_step)).T  # (N, n)
-    norms = np.linalg.norm(J, axis=0)
-    s = np.linalg.svd(J, compute_uv=False)
-    cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
-    F = J.T @ J / sigma ** 2
-    try:
-        cov = np.linalg.pinv(F, rcond=1e-15)
-        sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * 100.0
-    except np.linalg.LinAlgError:  # pragma: no cover - pinv of a finite matrix converges
-        sd = np.full(len(names), math.inf)
-    rel_sd = {k: float(x) for k, x in zip(names, sd)}
-    return {
-        "relative_sd_percent": rel_sd,
-        "relative_sensitivity": {k: float(x / max(norms.max(), 1e-300)) for k, x in zip(names, norms)},
-        "condition": cond,
-        "sigma": float(sigma),
-        "poorly_determined": [k for k in names if not rel_sd[k] <= limit_percent],
-    }

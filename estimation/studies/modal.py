@@ -138,3 +138,61 @@ class ModalGuide(ap.Approach):
 
     def _costs(self, ev: Any) -> np.ndarray:
         return np.sum(self._residuals(ev) ** 2, axis=1)
+
+
+def response_peaks(f: np.ndarray, h: np.ndarray, prominence: float = 0.3, count: int | None = None) -> np.ndarray:
+    """Frequencies (Hz) of the resonance peaks of ``|h|`` on a fine grid (parabolic refinement in log-magnitude).
+
+    Parameters
+    ----------
+    f : numpy.ndarray, Hz
+        ``(F,)`` uniformly spaced frequencies (e.g. every Welch bin in a band).
+    h : numpy.ndarray
+        ``(F,)`` complex response.
+    prominence : float, decades
+        Smallest prominence of a peak of ``log10 |h|``.
+    count : int, optional
+        Keep only the ``count`` most prominent peaks.
+    """
+    from scipy.signal import find_peaks
+
+    m = np.log10(np.maximum(np.abs(np.asarray(h)), 1e-300))
+    f = np.asarray(f, float)
+    k, props = find_peaks(m, prominence=prominence)
+    if count is not None and k.size > count:
+        k = np.sort(k[np.argsort(props["prominences"])[::-1][:count]])
+    k = k[(k > 0) & (k < m.size - 1)]
+    a, b, c = m[k - 1], m[k], m[k + 1]
+    den = a - 2 * b + c
+    shift = np.where(den != 0, 0.5 * (a - c) / np.where(den != 0, den, 1.0), 0.0)
+    return f[k] + np.clip(shift, -0.5, 0.5) * (f[1] - f[0])
+
+
+class ResonanceProxy(ap.Approach):
+    """First-stage cost of the frequency path: analytic log-magnitude residuals plus resonance-frequency residuals.
+
+    Parameters
+    ----------
+    proxy : Approach
+        The estimate's analytic response against the target (its residuals are log-magnitude errors).
+    guide : ModalGuide
+        Target resonance frequencies against the estimate's open-port modes (eigenvalues of the
+        current-driven winding: the poles of its input impedance).
+    weight : float
+        Weight of the log-frequency residuals.
+    """
+
+    name = "resonance-proxy"
+    engine = "analytic+eigenvalues"
+
+    def __init__(self, proxy: ap.Approach, guide: ModalGuide, weight: float = 100.0):
+        super().__init__(proxy.params)
+        self.proxy, self.guide, self.weight = proxy, guide, float(weight)
+
+    def _residuals(self, ev: Any) -> np.ndarray:
+        r_m = self.guide._residuals(ev)[:, : self.guide.f_t.size]
+        return np.concatenate([self.proxy._residuals(ev), self.weight * r_m], axis=1)
+
+    def _costs(self, ev: Any) -> np.ndarray:
+        r = self._residuals(ev)
+        return np.sum(np.where(np.isfinite(r), r, 10.0) ** 2, axis=1)

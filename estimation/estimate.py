@@ -1,0 +1,313 @@
+"""The default recipe of ``pris-cosim estimate``: global search, local solve, least-squares polish, restarts.
+
+The studies showed what finds winding parameters reliably (two-section
+study, thesis Table 4.5; three-section study, Tables 4.9/4.10):
+
+1. a global search on a cheap, smooth stand-in of the cost -- the analytic
+   frequency responses (for time, EMD and IEMD records: against the Welch H1
+   responses of the record itself, at the bins where its coherence is at
+   least 0.99) -- a genetic algorithm followed by the local solver
+   (L-BFGS-B), sized to the number of parameters ``n``: population
+   ``max(100, 40 n)`` (at most 300), 100 generations;
+2. a trust-region least-squares polish on the approach's own residuals
+   (Jacobian-scaled, :func:`estimation.studies.common.least_squares_polish`,
+   ``30 + 10 n`` evaluations of the residuals),
+   which moves the weakly sensitive resistances that the summed cost hides;
+3. ``restarts`` independent seeds (3 up to 12 parameters, 2 above); the
+   lowest own cost is kept and the others tell whether the answer is unique
+   (:mod:`estimation.verdict`); when the verdict finds the best one short of
+   its minimum (a Gauss-Newton step would still move a parameter), it is
+   polished once more with twice the evaluations.
+
+:func:`default_plan` gives the sizes; :func:`run_plan` runs the recipe and
+returns the estimate with its verdict. A config's ``"optimiser"`` replaces
+stage 1 (``"optimiser": "ga+local"`` etc. with its ``"options"``); the
+polish and restarts stay.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import approaches as ap
+from .optimisers import Budget, minimize
+from .parameters import ParameterSet
+from .verdict import verdict
+
+#: Ties assumed when a config names neither parameters nor ties: the thesis's estimation vectors
+#: (two-section 4.1.3: R2 = R1, C2 = C1).
+DEFAULT_TIES: dict[str, dict[str, str]] = {"two-section": {"R2": "R1", "C2": "C1"}}
+
+#: Bounds assumed when a config names no parameters: the thesis's search spaces (three-section:
+#: Table 4.8, R, L, C over three decades, couplings 0.85 .. 0.95). Other models: a tenth to ten
+#: times each value, couplings 0 .. 0.9999.
+DEFAULT_BOUNDS: dict[str, dict[str, tuple[float, float]]] = {
+    "three-section": {"Rs": (1e-3, 1.0), "Cs": (1e-12, 1e-9), "Cg": (1e-9, 1e-6), "Ls": (1e-6, 1e-3),
+                      "k12": (0.85, 0.95), "k13": (0.85, 0.95), "k23": (0.85, 0.95)},
+}
+
+#: Bins of the record's own Welch H1 used by the stand-in cost: coherence at least this.
+COHERENCE_MIN = 0.99
+
+
+def default_plan(n: int, per_eval_s: float | None = None) -> dict[str, Any]:
+    """Sizes of the default recipe for ``n`` parameters.
+
+    Returns
+    -------
+    dict
+        ``method``, ``options`` (GA population and generations, local
+        iterations), ``budget`` (evaluations per restart), ``restarts``,
+        ``polish_iterations``.
+    """
+    pop = int(min(300, max(100, 40 * n)))
+    gens = 100
+    restarts = 3 if n <= 12 else 2
+    return {"method": "ga+local",
+            "options": {"global_options": {"pop_size": pop, "max_generations": gens},
+                        "local_options": {"max_iter": 200}, "global_share": 0.85},
+            "budget": Budget(max_evals=int(pop * (gens + 1) / 0.85)),
+            "restarts": restarts, "polish_iterations": 30 + 10 * n}
+
+
+@dataclass
+class Outcome:
+    """Result of :func:`run_plan`."""
+
+    x: np.ndarray
+    cost: float
+    nfev: int
+    message: str
+    verdict: dict[str, Any]
+    ends: list[tuple[np.ndarray, float]] = field(default_factory=list)
+    stages: list[dict[str, Any]] = field(default_factory=list)
+
+
+def _rms(approach: ap.Approach, x: np.ndarray) -> float:
+    r = np.asarray(approach.residuals(np.asarray(x, float)[None]), float)[0]
+    return float(np.sqrt(np.mean(r ** 2))) if r.size and np.all(np.isfinite(r)) else math.inf
+
+
+def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed: int = 1,
+             plan: Mapping[str, Any] | None = None, proxy: ap.Approach | None = None,
+             time_limit_s: float | None = None, progress: bool = True,
+             noise: float | None = None) -> Outcome:
+    """Run the recipe on ``approach`` (stage 1 on ``proxy`` when given) and judge the answer.
+
+    Parameters
+    ----------
+    approach : Approach
+        The cost that is reported and polished (its residuals define the verdict).
+    params : ParameterSet
+    data : numpy.ndarray
+        The compared data, for the noise floor and scale of the verdict.
+    seed : int
+        Restart ``k`` uses seed ``seed + k``.
+    plan : mapping, optional
+        :func:`default_plan` keys (default: sized to ``approach.n``).
+    proxy : Approach, optional
+        Stand-in cost of stage 1.
+    time_limit_s : float, optional
+        Wall-time limit of the whole recipe (restarts stop starting after it).
+    progress : bool
+        One line per restart on stderr.
+    noise : float, optional
+        Known noise standard deviation of the residuals.
+
+    Returns
+    -------
+    Outcome
+    """
+    from .studies.common import least_squares_polish
+
+    plan = dict(plan or default_plan(approach.n))
+    first = proxy or approach
+    t0 = time.perf_counter()
+    ends: list[tuple[np.ndarray, float]] = []
+    stages: list[dict[str, Any]] = []
+    nfev = 0
+    best_x, best_c, message = None, math.inf, ""
+    for k in range(int(plan["restarts"])):
+        if time_limit_s is not None and k > 0 and time.perf_counter() - t0 > time_limit_s:
+            break
+        budget = plan["budget"]
+        if time_limit_s is not None:
+            left = max(1.0, time_limit_s - (time.perf_counter() - t0))
+            budget = Budget(max_evals=budget.max_evals, max_time_s=left / max(1, int(plan["restarts"]) - k))
+        r1 = minimize(first.cost_batch, first.n, method=plan["method"], seed=seed + k, budget=budget,
+                      options=dict(plan["options"]))
+        x = np.asarray(r1.x, float)
+        n_pol = 0
+        msg = r1.message
+        if int(plan["polish_iterations"]) > 0:
+            pol = least_squares_polish(approach, x, max_nfev=int(plan["polish_iterations"]),
+                                       max_time_s=None if time_limit_s is None
+                                       else max(1.0, time_limit_s - (time.perf_counter() - t0)))
+            x, n_pol = np.asarray(pol["x"], float), int(pol["nfev"])
+            msg = f"{r1.message}; then least squares: {pol['message']}"
+        c = float(approach.cost_batch(x[None])[0])
+        nfev += int(r1.nfev) + n_pol + 1
+        rms = _rms(approach, x)
+        ends.append((x, rms))
+        stages.append({"restart": k + 1, "seed": seed + k, "stage1_cost": float(r1.fun), "cost": c,
+                       "residual_rms": rms, "evaluations": int(r1.nfev) + n_pol + 1})
+        if progress:
+            print(f"estimate: restart {k + 1}/{plan['restarts']}: cost {c:.4g} (residual RMS {rms:.3g}), "
+                  f"{time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+        if c < best_c or best_x is None:
+            best_x, best_c, message = x, c, msg
+    assert best_x is not None
+    v = verdict(approach.residuals, params, best_x, data, ends, noise=noise)
+    if not v["converged"] and "not at a minimum" in v["convergence_reason"] and int(plan["polish_iterations"]) > 0 \
+            and (time_limit_s is None or time.perf_counter() - t0 < time_limit_s):
+        # the best restart stopped short of its minimum (a flat direction): polish it once more
+        pol = least_squares_polish(approach, best_x, max_nfev=2 * int(plan["polish_iterations"]))
+        x = np.asarray(pol["x"], float)
+        c = float(approach.cost_batch(x[None])[0])
+        nfev += int(pol["nfev"]) + 1
+        if c <= best_c:
+            ends = [(x, _rms(approach, x)) if e[0] is best_x else e for e in ends]
+            best_x, best_c = x, c
+            message += f"; final least squares: {pol['message']}"
+            v = verdict(approach.residuals, params, best_x, data, ends, noise=noise)
+    return Outcome(best_x, best_c, nfev, message, v, ends, stages)
+
+
+def default_band(model: Any, configuration: Any, override_values: Mapping[str, float] | None = None
+                 ) -> tuple[float, float]:
+    """Default comparison band of a model: from a fifth of its slowest to five times its fastest mode, Hz.
+
+    The two-section model keeps the thesis's 20 Hz - 9 kHz (4.1.2). Otherwise
+    the modes are the eigenvalues of the configuration's state matrix (current
+    drive at its port, shorts applied) at the model's values.
+    """
+    from pris_cosim.mna import MNA
+
+    if model.name == "two-section":
+        return 20.0, 9e3
+    circuit = model.circuit
+    shorted = circuit.shorted(configuration.shorts) if configuration.shorts else circuit
+    mna = MNA(shorted, current_inputs=[configuration.port])
+    A = np.asarray(mna.state_space(shorted.resolve(dict(override_values or {}), check=False)).A, float)
+    lam = np.linalg.eigvals(A.reshape(A.shape[-2:]))
+    f = np.abs(lam) / (2 * np.pi)
+    f = f[np.isfinite(f) & (f > 0)]
+    if not f.size:
+        return 10.0, 1e6
+    return float(max(f.min() / 5, 1e-3)), float(f.max() * 5)
+
+
+def waveform_specs(configuration: Any, channels: Mapping[str, np.ndarray]) -> list[ap.ResponseSpec]:
+    """Waveform recipes of the configuration's responses that the record's channels can form.
+
+    ``Zin`` is ``v_in / i_in``; a ratio ``(V(node) - V(minus)) / V(port)`` is
+    ``(v_node - v_minus) / v_in`` when those probe channels are in the record.
+    """
+    specs = []
+    for r in configuration.responses:
+        if r.node is None:
+            specs.append(ap.ResponseSpec(r.name, "i_in", "v_in"))
+            continue
+        a = "v_in" if r.node == configuration.port else f"v_{r.node}"
+        b = None if r.minus in (None, "0") else ("v_in" if r.minus == configuration.port else f"v_{r.minus}")
+        if a in channels and (b is None or b in channels):
+            specs.append(ap.ResponseSpec(r.name, "v_in", a if b is None else f"{a}-{b}"))
+    return specs
+
+
+def waveform_proxy(params: ParameterSet, response_set: Any, i_in: np.ndarray, v_in: np.ndarray, fs: float,
+                   fmin: float, fmax: float, points: int = 200, configuration: Any = None,
+                   probes: Mapping[str, np.ndarray] | None = None) -> ap.AnalyticFrequency | None:
+    """Stand-in cost for a waveform record: analytic responses against the record's own Welch H1 responses.
+
+    ``Zin`` and, with ``configuration`` and ``probes`` (``v_<node>`` channels),
+    every voltage ratio of the configuration the record can form. Only bins
+    where the record's coherence (quarter-record segments) is at least
+    :data:`COHERENCE_MIN` are compared; None when fewer than 10 remain.
+    """
+    n = int(np.size(i_in))
+    welch = ap.WelchSettings()
+    nper = welch.segment(n)
+    df = fs / nper
+    lo, hi = max(fmin, 2 * df), min(fmax, fs / 4)
+    if not hi > lo:
+        return None
+    bins, f = ap.bin_frequencies(fs, nper, lo, hi, points)
+    w = {"i_in": np.asarray(i_in, float), "v_in": np.asarray(v_in, float),
+         **{k: np.asarray(v, float) for k, v in (probes or {}).items()}}
+    spec = waveform_specs(configuration, w) if configuration is not None else [ap.ZIN_SPEC["Zin"]]
+    _, resp, _ = ap.responses_from_waveforms(w, fs, spec, welch, bins)
+    f_c, _, coh = ap.responses_from_waveforms(w, fs, spec, ap.WelchSettings(nperseg=max(8, n // 4)))
+    masks = {r: (np.interp(f, f_c, coh[r]) >= COHERENCE_MIN) & np.isfinite(resp[r]) & (np.abs(resp[r]) > 0)
+             for r in resp}
+    masks = {r: m for r, m in masks.items() if m.sum() >= 10}
+    if not masks:
+        return None
+    cost = ap.frequency_cost("sse", list(masks), masks)
+    return ap.AnalyticFrequency(params, response_set, f, {r: resp[r] for r in masks}, cost)
+
+
+class RecordDrive:
+    """Mixin: the estimate in the PRIS arrangement driven by the commanded bridge voltage.
+
+    The compared voltages are ``v_in`` (the cost of the thesis's time, EMD and
+    IEMD approaches) and, for the residuals (least-squares polish, verdict), also
+    every probe voltage the record holds (``probe_targets``): a record of the port
+    alone cannot tell the sections of a winding apart (thesis Fig. 4.9).
+    """
+
+    sim: ap.PrisEngine
+    probe_targets: dict[str, np.ndarray]
+
+    def voltages(self, overrides: Any) -> np.ndarray:
+        return self.sim.simulate(overrides)["v_in"]
+
+    def _residuals(self, ev: Any) -> np.ndarray:
+        w = self.sim.simulate(ev.overrides)
+        parts = [w["v_in"] - self.v_target]  # type: ignore[attr-defined]
+        parts += [w[k] - v for k, v in self.probe_targets.items() if k in w]
+        return np.concatenate(parts, axis=-1)
+
+
+class RecordTime(RecordDrive, ap.TimeDomain):
+    """Time approach (4.32) with the bridge-voltage drive and the probe voltages in the residuals."""
+
+    engine = "zoh-bridge"
+
+    def _costs(self, ev: Any) -> np.ndarray:
+        P = ev.unit.shape[0] if np.ndim(ev.unit) == 2 else 1
+        out = np.empty(P)
+        for a in range(0, P, self.chunk):
+            sub = {k: (v[a:a + self.chunk] if np.ndim(v) else v) for k, v in ev.overrides.items()}
+            r = self._residuals(type("E", (), {"overrides": sub})())
+            with np.errstate(invalid="ignore", over="ignore"):
+                c = np.sqrt(np.mean(r ** 2, axis=-1))
+            out[a:a + self.chunk] = np.where(np.isfinite(c), c, np.inf)
+        return out
+
+
+class RecordEMD(RecordDrive, ap.EMDApproach):
+    """EMD approach (4.39) on ``v_in`` with the bridge-voltage drive; residuals as :class:`RecordTime`."""
+
+    engine = "zoh-bridge+emd"
+
+
+class RecordIEMD(RecordDrive, ap.IEMDApproach):
+    """IEMD approach (4.45) on ``v_in`` with the bridge-voltage drive; residuals as :class:`RecordTime`."""
+
+    engine = "zoh-bridge+iemd"
+
+
+def frequency_data(approach: ap.Approach) -> np.ndarray:
+    """log10 magnitudes of a frequency approach's target (decades), concatenated."""
+    return np.concatenate([np.log10(np.abs(np.asarray(v))) for v in approach.target.values()])  # type: ignore[attr-defined]
+
+
+__all__ = ["DEFAULT_BOUNDS", "default_band", "RecordTime", "RecordEMD", "RecordIEMD", "waveform_specs", "DEFAULT_TIES", "default_plan", "run_plan", "Outcome", "waveform_proxy", "frequency_data", "COHERENCE_MIN"]
