@@ -57,6 +57,25 @@ from pris_cosim.signals import lfsr_prbs
 from . import costs as _costs
 from .parameters import ParameterSet
 
+#: Bytes that one chunk of a population may hold in simulated records (all arrays of the chunk together).
+CHUNK_BYTES = 256 * 2**20
+
+
+def rows_per_chunk(n_samples: int, arrays_per_row: int, limit: int) -> int:
+    """Parameter sets simulated together so that a chunk stays within :data:`CHUNK_BYTES`.
+
+    Parameters
+    ----------
+    n_samples : int
+        Samples per simulated record.
+    arrays_per_row : int
+        ``float64`` arrays of ``n_samples`` held per parameter set (states, outputs, temporaries).
+    limit : int
+        Largest chunk wanted (the caller's ``chunk``).
+    """
+    per_row = 8 * max(1, int(n_samples)) * max(1, int(arrays_per_row))
+    return max(1, min(int(limit), CHUNK_BYTES // per_row))
+
 __all__ = [
     "ApproachError",
     "EvalStats",
@@ -746,13 +765,15 @@ class TimeDomain(Approach):
     def _costs(self, ev: Any) -> np.ndarray:
         P = ev.unit.shape[0] if np.ndim(ev.unit) == 2 else 1
         out = np.empty(P)
-        for a in range(0, P, self.chunk):
-            sub = {k: (v[a:a + self.chunk] if np.ndim(v) else v) for k, v in ev.overrides.items()}
+        # states (n per sample), the output, its cleaned copy and the metric's temporaries, per parameter set
+        chunk = rows_per_chunk(self.v_target.size, getattr(self.sim.mna, "n_states", 8) + 6, self.chunk)
+        for a in range(0, P, chunk):
+            sub = {k: (v[a:a + chunk] if np.ndim(v) else v) for k, v in ev.overrides.items()}
             v = self.voltages(sub)
             bad = ~np.all(np.isfinite(v), axis=1)
             v = np.where(bad[:, None], 0.0, v)
             c = np.asarray(self._compare(v), float)
-            out[a:a + self.chunk] = np.where(bad, np.inf, c)
+            out[a:a + chunk] = np.where(bad, np.inf, c)
         return out
 
 

@@ -284,12 +284,14 @@ class RecordTime(RecordDrive, ap.TimeDomain):
     def _costs(self, ev: Any) -> np.ndarray:
         P = ev.unit.shape[0] if np.ndim(ev.unit) == 2 else 1
         out = np.empty(P)
-        for a in range(0, P, self.chunk):
-            sub = {k: (v[a:a + self.chunk] if np.ndim(v) else v) for k, v in ev.overrides.items()}
+        # every recorded waveform, the residuals and their squares, per parameter set
+        chunk = ap.rows_per_chunk(self.v_target.size, 3 * (len(self.probe_targets) + 2) + 2, self.chunk)
+        for a in range(0, P, chunk):
+            sub = {k: (v[a:a + chunk] if np.ndim(v) else v) for k, v in ev.overrides.items()}
             r = self._residuals(type("E", (), {"overrides": sub})())
             with np.errstate(invalid="ignore", over="ignore"):
                 c = np.sqrt(np.mean(r ** 2, axis=-1))
-            out[a:a + self.chunk] = np.where(np.isfinite(c), c, np.inf)
+            out[a:a + chunk] = np.where(np.isfinite(c), c, np.inf)
         return out
 
 

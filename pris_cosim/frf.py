@@ -2,8 +2,10 @@
 
 Two paths give the same numbers:
 
-- ``method="dense"``: one complex solve of the full nodal system per
-  frequency and parameter set (simple and robust, the reference);
+- ``method="dense"``: one direct solve per frequency and parameter set, no
+  eigenvectors: the balanced Hessenberg form of the exact state space
+  (Laub's method, ``O(n^2)`` per frequency), or the full nodal system when
+  the circuit has no state-space form (robust, the reference);
 - ``method="fast"``: one eigen-decomposition of the state matrix per
   parameter set gives poles and residues, then every frequency costs O(n).
 
@@ -20,6 +22,7 @@ import numpy as np
 
 from .circuit import Circuit, Numeric
 from .errors import CircuitError
+from .frf_kernels import hessenberg_solve, pole_residue_sum
 from .mna import MNA, StateSpace
 from .sparse_ac import SparseMNA, use_sparse
 
@@ -194,7 +197,7 @@ class ResponseModel:
         scalar = all(np.ndim(v) == 0 for v in values.values())
         s = 2j * np.pi * f
         if method == "dense":
-            z = self.mna.solve_dense(values, s, self._out_index)[:, :, 0, :]
+            z = self._dense(values, s)
         elif method == "fast":
             z = self._fast(values, s)
         else:
@@ -243,13 +246,27 @@ class ResponseModel:
         out = self._combine(np.moveaxis(z, 2, 1))
         return {k: v[0] if scalar else v for k, v in out.items()}
 
+    def _dense(self, values: Mapping[str, Numeric], s: np.ndarray) -> np.ndarray:
+        """Direct solve per frequency: the Hessenberg form of the exact state space, else the nodal system."""
+        if isinstance(self.mna, MNA):
+            try:
+                ss = self.mna.state_space(values).select([f"v({n})" for n in self._out_nodes])
+            except CircuitError:  # no state-space form (improper): the full nodal system
+                ss = None
+            if ss is not None and np.isrealobj(ss.A) and ss.A.shape[1] > 0:
+                return hessenberg_solve(ss.A, ss.B[:, :, 0], ss.C, ss.D[:, :, 0], s.imag)
+        return self.mna.solve_dense(values, s, self._out_index)[:, :, 0, :]
+
     def _fast(self, values: Mapping[str, Numeric], s: np.ndarray) -> np.ndarray:
         try:
             ss = self.mna.state_space(values).select([f"v({n})" for n in self._out_nodes])
         except CircuitError:  # improper (e.g. Z = R + sL driven by a current): no state space, solve densely
             return self.mna.solve_dense(values, s, self._out_index)[:, :, 0, :]
         pr, cond = poles_residues(ss)
-        z = pr.evaluate(s)
+        if np.isrealobj(ss.A):  # conjugate pole pairs in real arithmetic (compiled for large batches)
+            z = pole_residue_sum(pr.poles, pr.residues, pr.direct, s.imag)
+        else:
+            z = pr.evaluate(s)
         bad = np.flatnonzero(~(cond < 1e10))
         if bad.size:  # nearly defective eigenvectors: fall back to the dense solve there
             sub = {k: (np.asarray(v)[bad] if np.ndim(v) else v) for k, v in values.items()}
