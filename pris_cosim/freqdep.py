@@ -16,8 +16,11 @@ is passive by construction. The ladder is inserted into a
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
+from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
@@ -309,6 +312,70 @@ class TransformerEffects:
     sections: int = 6
 
 
+def _scaled(ladder: FosterRL, k: float) -> FosterRL:
+    """The ladder with every impedance scaled by ``k`` (all R and L times ``k``)."""
+    return FosterRL(ladder.r0 * k, ladder.l0 * k, ladder.r * k, ladder.l * k)
+
+
+#: Unit ladders of the default :class:`TransformerEffects`, as :func:`fit_unit_ladders` computes them
+#: (kept with the package so that building the built-in models needs no optimiser at start-up;
+#: ``tests/test_freqdep.py`` checks the file against a fresh fit).
+UNIT_LADDERS_FILE = Path(__file__).with_name("data") / "unit_ladders.json"
+
+
+def fit_unit_ladders(effects: "TransformerEffects") -> tuple[FosterRL, FosterRL, FosterRL]:
+    """The three ladders of ``effects`` for a unit element (1 Ohm, 1 Ohm, 1 H).
+
+    Every target is proportional to its element's value (skin effect to the DC
+    resistance, (2.4) to ``R_c``, the excess of (2.5) to ``L_c``) and the fits
+    weight relative errors, so the ladder of any value is the unit ladder
+    scaled by it.
+
+    Returns
+    -------
+    tuple of FosterRL
+        Skin-effect impedance, core-loss resistance, excess core-loop inductance.
+    """
+    e = effects
+    fmin, fmax = e.band_hz
+    n = e.sections
+    skin = fit_impedance(lambda f: 1 + e.skin_a * (1j * f / e.skin_f0) ** e.skin_b, fmin, fmax, n)
+    core = fit_resistance(lambda f: core_loss_resistance(f, e.core_a_factor, e.core_b_hz), fmin, fmax, n)
+    fh = e.magnetising_f_hz
+    excess = fit_inductance(lambda f: (f / fh) ** (-e.magnetising_b) - 1, fmin, fh / 3, n)
+    return skin, core, excess
+
+
+def _ladder_json(lad: FosterRL) -> dict:
+    return {"r0": lad.r0, "l0": lad.l0, "r": [float(x) for x in lad.r], "l": [float(x) for x in lad.l]}
+
+
+def _ladder_from_json(d: dict) -> FosterRL:
+    return FosterRL(float(d["r0"]), float(d["l0"]), np.asarray(d["r"], float), np.asarray(d["l"], float))
+
+
+@lru_cache(maxsize=16)
+def unit_ladders(effects: "TransformerEffects") -> tuple[FosterRL, FosterRL, FosterRL]:
+    """:func:`fit_unit_ladders`, read from :data:`UNIT_LADDERS_FILE` for the default effects."""
+    if effects == TransformerEffects():
+        try:
+            table = json.loads(UNIT_LADDERS_FILE.read_text())
+            if table.get("effects") == asdict(effects) | {"band_hz": list(effects.band_hz)}:
+                return tuple(_ladder_from_json(table[k]) for k in ("skin", "core", "excess"))  # type: ignore[return-value]
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    return fit_unit_ladders(effects)
+
+
+def write_unit_ladders(path: Path = UNIT_LADDERS_FILE) -> None:
+    """Write the unit ladders of the default effects to ``path`` (JSON)."""
+    e = TransformerEffects()
+    skin, core, excess = fit_unit_ladders(e)
+    table = {"effects": asdict(e) | {"band_hz": list(e.band_hz)}, "skin": _ladder_json(skin),
+             "core": _ladder_json(core), "excess": _ladder_json(excess)}
+    path.write_text(json.dumps(table, indent=1) + "\n")
+
+
 def add_transformer_effects(
     circuit: Circuit,
     resistors: list[str],
@@ -338,20 +405,13 @@ def add_transformer_effects(
     """
     values = circuit.resolve()
     out = circuit.with_values({e.name: values[e.key] for e in circuit.elements})
-    fmin, fmax = effects.band_hz
-    n = effects.sections
-    e = effects
+    skin, core, excess = unit_ladders(effects)
     for name in resistors:
-        r0 = float(values[name.lower()]) / e.skin_c
-        lad = fit_impedance(lambda f, r0=r0: r0 * (1 + e.skin_a * (1j * f / e.skin_f0) ** e.skin_b), fmin, fmax, n)
-        out = replace_with_ladder(out, name, lad)
+        out = replace_with_ladder(out, name, _scaled(skin, float(values[name.lower()]) / effects.skin_c))
     if core_resistor is not None:
-        rc = float(values[core_resistor.lower()])
-        lad = fit_resistance(lambda f: core_loss_resistance(f, e.core_a_factor * rc, e.core_b_hz), fmin, fmax, n)
-        out = replace_with_ladder(out, core_resistor, lad)
+        out = replace_with_ladder(out, core_resistor, _scaled(core, float(values[core_resistor.lower()])))
     if core_inductor is not None:
         lc = float(values[core_inductor.lower()])
-        fh = e.magnetising_f_hz
-        excess = fit_inductance(lambda f: lc * ((f / fh) ** (-e.magnetising_b) - 1), fmin, fh / 3, n)
-        out = replace_with_ladder(out, core_inductor, FosterRL(0.0, lc + excess.l0, excess.r, excess.l))
+        ex = _scaled(excess, lc)
+        out = replace_with_ladder(out, core_inductor, FosterRL(0.0, lc + ex.l0, ex.r, ex.l))
     return out

@@ -88,3 +88,12 @@ def test_extended_circuit_against_ngspice():
     f, v = ngspice.ac_analysis(ext, "n1", ["n1"], 1e3, 1e7, points_per_decade=10)
     z = frequency_response(ext, "n1", f)["Zin"]
     assert np.max(np.abs(z - v[0]) / np.abs(v[0])) < 1e-6
+
+
+def test_packaged_unit_ladders_equal_a_fresh_fit():
+    """The ladders kept with the package (no optimiser at start-up) are the ones the fit gives now."""
+    from pris_cosim.freqdep import TransformerEffects, fit_unit_ladders, unit_ladders
+
+    f = np.logspace(0, 5.3, 60)
+    for kept, fresh in zip(unit_ladders(TransformerEffects()), fit_unit_ladders(TransformerEffects())):
+        assert np.allclose(kept.impedance(f), fresh.impedance(f), rtol=1e-12, atol=0)

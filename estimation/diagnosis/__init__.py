@@ -1,8 +1,21 @@
-"""Diagnosis: where the simulation is wrong, why, what to add, and how much it gains."""
+"""Diagnosis: where the simulation is wrong, why, what to add, and how much it gains.
 
-from .diagnose import Diagnosis, diagnose_frequency
-from .fit import DiagnosisError, FitResult, FrequencyFit
-from .waveform import WaveformDiagnosis, diagnose_waveforms
+The public names are imported on first use, so that registering the
+``diagnose`` command (``pris-cosim --help``) does not load SciPy.
+"""
 
-__all__ = ["Diagnosis", "DiagnosisError", "FitResult", "FrequencyFit", "WaveformDiagnosis", "diagnose_frequency",
-           "diagnose_waveforms"]
+from __future__ import annotations
+
+from importlib import import_module
+from typing import Any
+
+_WHERE = {"Diagnosis": "diagnose", "diagnose_frequency": "diagnose", "DiagnosisError": "fit", "FitResult": "fit",
+          "FrequencyFit": "fit", "WaveformDiagnosis": "waveform", "diagnose_waveforms": "waveform"}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _WHERE:
+        return getattr(import_module(f".{_WHERE[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
