@@ -77,7 +77,7 @@ def cases(quick: bool) -> list[dict]:
     for pair in COMPOUND:
         for s in range(1 if quick else 2):
             out.append({"kind": "one-port", "causes": list(pair), "seed": 100 + s})
-    for s in range(2 if quick else 4):
+    for s in range(2 if quick else 6):
         out.append({"kind": "one-port", "causes": ["none"], "seed": 200 + s, "noise": 0.01})
     for cause in SINGLE:
         for s in range(1 if quick else 2):
@@ -87,7 +87,8 @@ def cases(quick: bool) -> list[dict]:
             out.append({"kind": "two-winding", "causes": [cause], "seed": 400, "group": g})
     for pair in COMPOUND[: 3 if quick else 6]:
         out.append({"kind": "two-winding", "causes": list(pair), "seed": 500, "group": "all"})
-    out.append({"kind": "two-winding", "causes": ["none"], "seed": 600, "noise": 0.01})
+    for s in range(1 if quick else 2):
+        out.append({"kind": "two-winding", "causes": ["none"], "seed": 600 + s, "noise": 0.01})
     return out
 
 

@@ -165,6 +165,32 @@ def fit_inductance(
     return FosterRL(float(r0), float(coef[0]), l * wk[keep], l)
 
 
+def relative_nnls(basis: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Non-negative coefficients ``c`` with ``basis @ c ~ target``, relative to ``|target|``, real and imaginary parts.
+
+    Parameters
+    ----------
+    basis : numpy.ndarray
+        ``(F, m)`` complex basis functions at the fitted frequencies.
+    target : numpy.ndarray
+        ``(F,)`` complex target (an impedance or admittance).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(m,)`` coefficients, all ``>= 0`` (columns equilibrated for the solve).
+    """
+    from scipy.optimize import nnls  # imported here: scipy.optimize costs half a second at start-up
+
+    weight = 1 / np.maximum(np.abs(target), 1e-300)[:, None]
+    a = np.vstack([(basis * weight).real, (basis * weight).imag])
+    b = np.concatenate([(target * weight[:, 0]).real, (target * weight[:, 0]).imag])
+    col = np.abs(a).max(axis=0)
+    col[col == 0] = 1.0
+    coef, _ = nnls(a / col, b)
+    return coef / col
+
+
 def fit_impedance(
     z_of_f: Callable[[np.ndarray], np.ndarray], fmin: float, fmax: float, n_sections: int = 10
 ) -> FosterRL:
@@ -190,15 +216,7 @@ def fit_impedance(
     wk = _corners(fmin, fmax, n_sections)
     s = 1j * 2 * np.pi * f[:, None]
     basis = np.column_stack([np.ones(f.size), s[:, 0], (s / wk) / (1 + s / wk)])
-    weight = 1 / np.maximum(np.abs(target), 1e-30)[:, None]
-    a = np.vstack([(basis * weight).real, (basis * weight).imag])
-    b = np.concatenate([(target * weight[:, 0]).real, (target * weight[:, 0]).imag])
-    col = np.abs(a).max(axis=0)
-    col[col == 0] = 1.0
-    from scipy.optimize import nnls  # imported here: scipy.optimize costs half a second at start-up
-
-    coef, _ = nnls(a / col, b)
-    coef = coef / col
+    coef = relative_nnls(basis, target)
     r = coef[2:]
     keep = r > 1e-12 * max(r.max(initial=0.0), 1e-300)
     return FosterRL(float(coef[0]), float(coef[1]), r[keep], r[keep] / wk[keep])

@@ -5,7 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy.optimize import nnls
+
+from pris_cosim.freqdep import relative_nnls
 
 
 def fit_admittance_rc(y_of_f: Callable[[np.ndarray], np.ndarray], fmin: float, fmax: float,
@@ -34,13 +35,7 @@ def fit_admittance_rc(y_of_f: Callable[[np.ndarray], np.ndarray], fmin: float, f
     wk = 2 * np.pi * np.logspace(np.log10(fmin) - 0.5, np.log10(fmax) + 0.5, n_branches)
     s = 2j * np.pi * f[:, None]
     basis = np.column_stack([s[:, 0], (s / wk) / (1 + s / wk)])
-    weight = 1 / np.maximum(np.abs(target), 1e-300)[:, None]
-    a = np.vstack([(basis * weight).real, (basis * weight).imag])
-    b = np.concatenate([(target * weight[:, 0]).real, (target * weight[:, 0]).imag])
-    col = np.abs(a).max(axis=0)
-    col[col == 0] = 1.0
-    coef, _ = nnls(a / col, b)
-    coef = coef / col
+    coef = relative_nnls(basis, target)
     out = []
     if coef[0] > 0:
         out.append((0.0, float(coef[0])))
