@@ -23,7 +23,7 @@ import numpy as np
 
 from . import __version__
 from .circuit import Circuit
-from .errors import NonPassiveWarning
+from .errors import CircuitError, NonPassiveWarning
 from .frf import Response, logspace_hz
 from .models import Configuration, Model, ResponseSet, get_model, model_names
 from .units import parse_value
@@ -101,7 +101,6 @@ def load_circuit(args: argparse.Namespace) -> tuple[Circuit, Model | None]:
         circuit = model.circuit
     sets = parse_sets(args.set)
     if sets:
-        from .errors import CircuitError
         from .netlist import check_ranges
 
         try:
@@ -160,7 +159,16 @@ def cmd_frf(args: argparse.Namespace) -> int:
     lam = circuit.smallest_inductance_eigenvalue(values)
     from .conditioning import check_response_set
 
-    check_response_set(rs, f)  # one line naming the element when double precision cannot resolve the values
+    try:  # one line naming the element (and its file:line:column) when double precision cannot resolve the values
+        check_response_set(rs, f)
+    except CircuitError as exc:
+        if args.netlist:
+            from pathlib import Path
+
+            from .netlist import locate_element
+
+            raise CircuitError(f"{args.netlist}{locate_element(Path(args.netlist), str(exc))}: {exc}") from None
+        raise CircuitError(f"--model {args.model}: {exc}") from None
     responses = rs.evaluate(f, method=args.method)
     if args.plot:
         from .plotting import plot_responses

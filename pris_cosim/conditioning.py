@@ -94,8 +94,8 @@ def check_response_set(response_set, frequency_hz: np.ndarray, overrides=None) -
     eps = np.finfo(float).eps
     for m in response_set.models:
         values = m.circuit.resolve(overrides, check=False)
-        if any(np.iscomplexobj(np.asarray(v)) for v in values.values()):
-            continue
+        if any(np.iscomplexobj(np.asarray(v)) for v in values.values()) or not hasattr(m.mna, "matrices"):
+            continue  # complex (frequency-dependent) values, or a large circuit solved by sparse LU
         cond = nodal_condition(m.mna, values, s)
         err = eps * np.where(np.isfinite(cond), cond, np.inf)
         k = int(np.argmax(err.max(axis=0)))

@@ -430,6 +430,14 @@ def read_netlist(path: str | os.PathLike[str]) -> Circuit:
     return circuit
 
 
+def locate_element(path: Path, message: str) -> str:
+    """``:line:column`` in the netlist file ``path`` of the element (or node) that ``message`` names, else ``""``."""
+    try:
+        return _locate(path.read_text(errors="replace"), message)
+    except OSError:
+        return ""
+
+
 def _locate(text: str, message: str) -> str:
     """``:line:column`` of the element a topology message names (or of the first element on the node it names)."""
     m = re.search(r"element '([^']+)'|node '([^']+)'", message)
