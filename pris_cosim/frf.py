@@ -68,10 +68,15 @@ def poles_residues(ss: StateSpace, input_index: int = 0) -> tuple[PolesResidues,
     """
     lam, V = np.linalg.eig(ss.A)
     b = ss.B[:, :, input_index : input_index + 1]
-    w = np.linalg.solve(V, b.astype(complex))[:, :, 0]  # (P, n)
+    with np.errstate(all="ignore"):  # a singular V (defective A) shows as an infinite condition number below
+        try:
+            Vi = np.linalg.inv(V)
+        except np.linalg.LinAlgError:
+            Vi = np.full_like(V, np.nan)
+    w = (Vi @ b)[:, :, 0]  # (P, n): left eigenvectors times the input
     cv = ss.C @ V  # (P, ny, n)
     residues = cv * w[:, None, :]
-    cond = np.linalg.norm(V, axis=(1, 2)) * np.linalg.norm(np.linalg.inv(V), axis=(1, 2))
+    cond = np.linalg.norm(V, axis=(1, 2)) * np.linalg.norm(Vi, axis=(1, 2))
     return PolesResidues(lam, residues, ss.D[:, :, input_index]), cond
 
 
