@@ -43,11 +43,12 @@ MODELS = ["two-section", "three-section", "cascade-4", "hv-4section", "hv-4secti
 
 def draw(model, rng: np.random.Generator, spread: float) -> dict[str, float]:
     """Random free values around the nominal ones (SI units)."""
-    base = model.circuit.resolve(check=False)
+    rows = {r["name"].lower(): r for r in model.circuit.summary()}
     out = {}
     for name in model.circuit.free_names():
-        v = float(np.real(base[name.lower()]))
-        if name.upper().startswith("K") or abs(v) < 1:  # couplings (dimensionless)
+        row = rows[name.lower()]
+        v = float(row["value"])
+        if row["kind"] == "K" or (row["kind"] == "param" and not row["unit"] and abs(v) < 1):  # couplings
             out[name] = float(np.clip(v * rng.uniform(0.98, 1.02), -0.9999, 0.9999))
         else:
             out[name] = v * spread ** rng.uniform(-1, 1)
