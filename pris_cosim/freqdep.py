@@ -126,7 +126,7 @@ def fit_resistance(
     weight = 1 / np.maximum(target, 1e-30)[:, None]
     from scipy.optimize import nnls  # imported here: scipy.optimize costs half a second at start-up
 
-    coef, _ = nnls(basis * weight, target * weight[:, 0])
+    coef, _ = nnls(basis * weight, target * weight[:, 0], maxiter=50 * basis.shape[1])
     keep = coef[1:] > 1e-12 * max(coef.max(), 1e-300)
     r = coef[1:][keep]
     return FosterRL(float(coef[0]), float(l0), r, r / wk[keep])
@@ -159,7 +159,7 @@ def fit_inductance(
     weight = 1 / target[:, None]
     from scipy.optimize import nnls  # imported here: scipy.optimize costs half a second at start-up
 
-    coef, _ = nnls(basis * weight, target * weight[:, 0])
+    coef, _ = nnls(basis * weight, target * weight[:, 0], maxiter=50 * basis.shape[1])
     keep = coef[1:] > 1e-12 * max(coef.max(), 1e-300)
     l = coef[1:][keep]
     return FosterRL(float(r0), float(coef[0]), l * wk[keep], l)
@@ -187,7 +187,7 @@ def relative_nnls(basis: np.ndarray, target: np.ndarray) -> np.ndarray:
     b = np.concatenate([(target * weight[:, 0]).real, (target * weight[:, 0]).imag])
     col = np.abs(a).max(axis=0)
     col[col == 0] = 1.0
-    coef, _ = nnls(a / col, b)
+    coef, _ = nnls(a / col, b, maxiter=50 * a.shape[1])
     return coef / col
 
 

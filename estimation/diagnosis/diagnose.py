@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from pris_cosim.circuit import Circuit
+from pris_cosim.errors import CircuitError
 from pris_cosim.frf import Response
 from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
 
@@ -186,8 +187,6 @@ def diagnose_frequency(
     Diagnosis
     """
     from threadpoolctl import threadpool_limits
-
-    from pris_cosim.errors import CircuitError
 
     with threadpool_limits(limits=1):  # small matrices: BLAS threads only contend for the cores
         try:
@@ -369,6 +368,11 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
     return best, [t[1] for t in screened]
 
 
+#: What a candidate's fit may raise when its parameters make the network degenerate (e.g. a node left with
+#: only inductors): the candidate is dropped, the diagnosis goes on.
+_CANDIDATE_FAILURES = (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError)
+
+
 def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effect], must_beat: float,
                          top: int = 2) -> FitResult | None:
     """Every split and end addition: the new elements fitted alone first, the best ``top`` then in full.
@@ -385,18 +389,21 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
             whole = ctx.fit(cand.circuit, effects)
             new = {n.lower() for n in cand.new_elements}
             first = ctx.fit(cand.circuit, effects, fixed=[n for n in whole.free if n.lower() not in new])
-        except (DiagnosisError, ValueError):
+            r = first.fit(x0s=np.concatenate([np.zeros(first.nc), tail])[None], grid=False, max_nfev=15, tol=1e-5)
+        except _CANDIDATE_FAILURES:  # a structure the data drive into a degenerate network: not a candidate
             continue
-        r = first.fit(x0s=np.concatenate([np.zeros(first.nc), tail])[None], grid=False, max_nfev=15, tol=1e-5)
         staged.append((r.cost, cand, r))
     staged.sort(key=lambda t: t[0])
     best = None
     for i, (_, cand, first) in enumerate(staged):
         if i >= top and (best is not None and best.cost < must_beat or i >= top + 3):
             break
-        fit = ctx.fit(cand.circuit.with_values(first.values), effects)
-        res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), first.x[current_nc(first):]])[None], grid=False,
-                      max_nfev=60, tol=1e-6)
+        try:
+            fit = ctx.fit(cand.circuit.with_values(first.values), effects)
+            res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), first.x[current_nc(first):]])[None], grid=False,
+                          max_nfev=60, tol=1e-6)
+        except _CANDIDATE_FAILURES:
+            continue
         res.structure = cand.how
         res.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"] if effects else \
             ["missing-section"]

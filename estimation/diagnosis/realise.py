@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from pris_cosim.errors import NonPassiveWarning
+from pris_cosim.errors import CircuitError, NonPassiveWarning
 from pris_cosim.frf import ResponseModel
 from pris_cosim.models import Configuration
 
@@ -41,8 +41,13 @@ def realise_extended(fit: FitResult, configurations: Sequence[Configuration], f:
     groups = winding_groups(circuit, ports, names)
     order = sorted(zip(fit.effects, fit.params), key=lambda t: t[0].group == "port")
     notes = []
+    unrealised = False
     for eff, p in order:
-        circuit, note = eff.realise(circuit, groups, p, float(f[0]), float(f[-1]))
+        try:
+            circuit, note = eff.realise(circuit, groups, p, float(f[0]), float(f[-1]))
+        except (RuntimeError, ValueError, CircuitError) as exc:  # no passive network found for this formula
+            unrealised = True
+            note = f"no passive network found ({exc}); the formula is reported, the circuit leaves it out"
         notes.append({"cause": eff.cause, "form": eff.form, "group": eff.group, "formula": eff.formula(p),
                       "note": note})
     dev_db = dev_deg = 0.0
@@ -57,7 +62,7 @@ def realise_extended(fit: FitResult, configurations: Sequence[Configuration], f:
                 e = np.log(v / fit.predicted[n])
                 dev_db = max(dev_db, float(np.max(np.abs(e.real))) * 20 / np.log(10))
                 dev_deg = max(dev_deg, float(np.degrees(np.max(np.abs(e.imag)))))
-    ok = dev_db <= MAX_DEVIATION_DB and dev_deg <= MAX_DEVIATION_DEG
+    ok = dev_db <= MAX_DEVIATION_DB and dev_deg <= MAX_DEVIATION_DEG and not unrealised
     note = "frequency-dependent elements realised as passive networks (simulable, FMU-ready)"
     if not ok:
         note = ("the fitted formulas are not realised faithfully by a passive network (a real-valued R(f) or L(f) "
