@@ -387,6 +387,9 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
                 else:
                     eng = ap.PrisEngine(circuit, conf.port, source, fs, n)
                     approach = ap.SimulatedFrequency(params, eng, specs, welch, bins, target, cost)
+        elif kind == "waveforms-csv":
+            approach, proxy = _frequency_from_record(approach_name, params, model, conf, source, _read_record(tgt),
+                                                     "source" in cfg, metric, fmin, fmax, points)
         else:
             raise EstimationInputError(f"target kind {kind!r} does not suit approach {approach_name!r}")
     elif approach_name in ("time", "emd", "iemd"):
@@ -416,6 +419,46 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
         raise EstimationInputError(f"approach must be frequency, frequency-simulated, time, emd or iemd (got {approach_name!r})")
     return _fit_and_report(cfg, approach, params, model, approach_name, metric, known_target, t0, progress,
                            proxy)
+
+
+def _frequency_from_record(name: str, params: Any, model: Any, conf: Any, source: Any, wf: Any, source_known: bool,
+                           metric: str, fmin: float, fmax: float, points: int) -> Any:
+    """Frequency approaches against a waveform record's own Welch H1 ``Zin`` (bins with coherence >= 0.99).
+
+    ``frequency``: the estimate's analytic ``Zin``; ``frequency-simulated``: the estimate's PRIS
+    waveforms driven by the record's bridge voltage through the source's RLC (config ``source``
+    required), through the same Welch estimator, with the analytic one as its stage-1 stand-in.
+
+    Returns
+    -------
+    (approach, stand-in or None)
+    """
+    from . import approaches as ap
+    from .drives import RecordBridgeEngine
+
+    fs, n = wf.fs, wf.n_samples
+    welch = ap.WelchSettings()
+    nper = welch.segment(n)
+    lo, hi = max(fmin, 2 * fs / nper), min(fmax, fs / 4)
+    if not hi > lo:
+        raise EstimationInputError(f"frequency band {fmin:g}..{fmax:g} Hz is empty for this record")
+    bins, f = ap.bin_frequencies(fs, nper, lo, hi, points)
+    w = {"i_in": wf.i_in, "v_in": wf.v_in}
+    spec = [ap.ZIN_SPEC["Zin"]]
+    _, resp, coh = ap.responses_from_waveforms(w, fs, spec, welch, bins)
+    keep = (coh["Zin"] >= 0.99) & np.isfinite(resp["Zin"]) & (np.abs(resp["Zin"]) > 0)
+    if keep.sum() < 5:
+        raise EstimationInputError("fewer than 5 frequency bins of the record have coherence >= 0.99")
+    target = {"Zin": resp["Zin"][keep]}
+    cost = ap.frequency_cost(metric, ["Zin"])
+    analytic = ap.AnalyticFrequency(params, model.response_set([conf.name]), f[keep], target, cost)
+    if name == "frequency":
+        return analytic, None
+    if not source_known:
+        raise EstimationInputError("approach 'frequency-simulated' on a waveform record needs the source's R, L, C "
+                                   "(config key 'source')")
+    eng = RecordBridgeEngine(model.circuit, conf.port, source, fs, wf.v_bprbs, probes=[])
+    return ap.SimulatedFrequency(params, eng, spec, welch, bins[keep], target, cost), analytic
 
 
 def _time_approach(name: str, params: Any, model: Any, conf: Any, source: Any, fs: float, i_in: np.ndarray,

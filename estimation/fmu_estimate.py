@@ -106,9 +106,14 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
     if not isinstance(spec, dict) or not spec:
         raise _bad("config key 'parameters' must map FMU parameters to {\"min\": .., \"max\": ..}")
     params: dict[str, list[Any]] = {}
+    ties = cfg.get("ties", {})
+    if not isinstance(ties, dict) or any(k not in variables or not isinstance(e, str) for k, e in ties.items()):
+        raise _bad(f"config key 'ties' must map parameters of {Path(fmu).name} to expressions")
+    tie_text = " ".join(ties.values())
     for name, b in spec.items():
         v = variables.get(name)
-        if v is None or v.causality != "parameter":
+        helper = v is None and name in tie_text  # e.g. a coupling k12 in "M12": "k12*sqrt(L1*L2)"
+        if not helper and (v is None or v.causality != "parameter"):
             raise _bad(f"config key 'parameters': {name!r} is not a parameter of {Path(fmu).name}")
         if not isinstance(b, dict) or not {"min", "max"} <= set(b):
             raise _bad(f"parameter {name!r}: give {{\"min\": .., \"max\": ..}}")
@@ -122,9 +127,6 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
         if scale not in ("log", "linear") or (scale == "log" and lo <= 0):
             raise _bad(f"parameter {name!r}: scale must be 'linear', or 'log' with min > 0")
         params[name] = [lo, hi, scale]
-    ties = cfg.get("ties", {})
-    if not isinstance(ties, dict) or any(k not in variables or not isinstance(e, str) for k, e in ties.items()):
-        raise _bad(f"config key 'ties' must map parameters of {Path(fmu).name} to expressions")
     tgt = cfg.get("target")
     if not isinstance(tgt, dict) or tgt.get("kind", "waveforms-csv") != "waveforms-csv":
         raise _bad("config key 'target' must be {\"kind\": \"waveforms-csv\", \"path\": FILE} with an FMU")

@@ -134,7 +134,10 @@ class FmuProblem:
         elif self.approach == "frequency" and self.input is None:
             raise FmuSetupError("approach 'frequency' with an FMU without input needs 'current' (its current output)")
         self.has_frequency = self.current is not None
-        names = list(self.params.names)
+        from .fmu_model import fmu_variables
+
+        fmu_names = fmu_variables(setup["fmu"])[1]
+        names = [k for k in self.params.names if k in fmu_names]  # helpers (e.g. couplings) only feed ties
         self.model = FmuModel(setup["fmu"], names, fmu_out, input=self.input, substeps=int(setup.get("substeps", 2)),
                               limit=1e6 * max(float(np.max(np.abs(v))) for v in self.targets.values()) + 1.0)
         self.simulations = 0
@@ -162,7 +165,7 @@ class FmuProblem:
                 raise FmuSetupError(f"frequency band {fmin:g}..{fmax:g} Hz is empty for this record")
             bins, self.f = bin_frequencies(self.fs, nper, fmin, fmax, int(fr.get("points", 200)))
             _, H, coh, _ = welch_h1(self.i_target, [v], self.fs, self.welch, bins)
-            keep = (coh[0] >= COHERENCE_MIN) & np.isfinite(H[0]) & (np.abs(H[0]) > 0)
+            keep = (coh[0] >= float(fr.get("coherence", COHERENCE_MIN))) & np.isfinite(H[0]) & (np.abs(H[0]) > 0)
             if keep.sum() < 5:
                 if self.approach == "frequency":
                     raise FmuSetupError("fewer than 5 frequency bins of the record have coherence >= 0.99")
@@ -192,7 +195,7 @@ class FmuProblem:
         return np.concatenate([self.targets[o] / self.scale[o] for o in self.outputs])
 
     def values(self, x: np.ndarray) -> dict[str, float]:
-        """FMU parameter values (SI) of one unit-cube point, ties included."""
+        """Parameter values (SI) of one unit-cube point, ties included."""
         ev = self.params.evaluate(np.clip(np.asarray(x, float), 0.0, 1.0))
         return {k: float(v) for k, v in ev.values.items()}
 
