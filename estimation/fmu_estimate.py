@@ -61,7 +61,7 @@ from .fmu_problem import APPROACHES, problem
 __all__ = ["make_setup", "run_fmu_estimate", "design_task", "restart_task"]
 
 KNOWN = {"fmu", "input", "output", "outputs", "current", "parameters", "ties", "target", "approach", "frequency",
-         "budget", "substeps", "diff_step", "seed"}
+         "budget", "substeps", "diff_step", "seed", "first_window"}
 
 
 def _bad(text: str) -> FmuSetupError:
@@ -134,7 +134,8 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
              "current": cfg.get("current", "i_in" if inp is None and "i_in" in variables else None),
              "parameters": params, "ties": dict(ties), "target": path_of(tgt.get("path"), "target.path"),
              "approach": approach, "frequency": dict(cfg.get("frequency", {})),
-             "substeps": int(cfg.get("substeps", 2)), "diff_step": float(cfg.get("diff_step", 1e-3))}
+             "substeps": int(cfg.get("substeps", 2)), "diff_step": float(cfg.get("diff_step", 1e-3)),
+             "first_window": int(cfg.get("first_window", 0))}
     if not Path(setup["target"]).is_file():
         raise _bad(f"target file not found: {tgt.get('path')}")
     problem(setup)  # reads the record and instantiates the FMU here: every setup error now, in one line
@@ -145,8 +146,10 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
 def design_task(setup: dict[str, Any], points: list[list[float]]) -> dict[str, Any]:
     """Costs of design points (unit cube) with the worker's FMU instance."""
     pb = problem(setup)
-    costs = [pb.residual(np.asarray(x, float), pb.stand_in)[1] for x in points]
-    return {"costs": costs, "scored_on": pb.stand_in, **pb.stats()}
+    wins = pb.windows()
+    w = wins[0] if wins else None
+    costs = [pb.residual(np.asarray(x, float), "time", w)[1] for x in points]
+    return {"costs": costs, "scored_on": f"time, first {w or pb.n} samples", **pb.stats()}
 
 
 class _Spent(Exception):
@@ -159,17 +162,20 @@ def restart_task(setup: dict[str, Any], x0: list[float], simulations: int) -> di
 
     pb = problem(setup)
     x = np.clip(np.asarray(x0, float), 0.0, 1.0)
-    stages = [pb.stand_in, pb.approach] if pb.stand_in != pb.approach else [pb.approach]
+    stages: list[tuple[str, int | None]] = [("time", w) for w in pb.windows()] + [(pb.approach, None)]
+    if pb.approach != "time":
+        stages.insert(-1, ("time", None))
     messages = []
     best: dict[str, Any] = {}
-    for k, which in enumerate(stages):
-        limit = simulations if k == len(stages) - 1 else simulations // 2
+    for k, (which, window) in enumerate(stages):
+        # the budget is spread evenly over the stages; what a stage leaves goes to the next
+        limit = simulations if k == len(stages) - 1 else int(simulations * (k + 1) / len(stages))
         best = {"x": [float(v) for v in x], "cost": math.inf}
 
-        def fun(z: np.ndarray, which: str = which, limit: int = limit) -> np.ndarray:
+        def fun(z: np.ndarray, which: str = which, limit: int = limit, window: int | None = window) -> np.ndarray:
             if pb.simulations >= limit:
                 raise _Spent
-            r, c = pb.residual(z, which)
+            r, c = pb.residual(z, which, window)
             if c < best["cost"]:
                 best["x"], best["cost"] = [float(v) for v in z], float(c)
             return r
@@ -178,11 +184,11 @@ def restart_task(setup: dict[str, Any], x0: list[float], simulations: int) -> di
             sol = least_squares(fun, x, jac="2-point", bounds=(0.0, 1.0), method="trf",
                                 diff_step=float(setup["diff_step"]), x_scale=1.0, ftol=1e-12, xtol=1e-10,
                                 gtol=1e-12, max_nfev=10 * simulations)
-            messages.append(f"{which}: {sol.message}")
+            messages.append(f"{which}{f' ({window} samples)' if window else ''}: {sol.message}")
         except _Spent:
-            messages.append(f"{which}: stopped at {limit} FMU runs in all")
+            messages.append(f"{which}{f' ({window} samples)' if window else ''}: stopped at {limit} FMU runs in all")
         if not math.isfinite(best["cost"]):
-            best["cost"] = float(pb.residual(np.asarray(best["x"]), which)[1])
+            best["cost"] = float(pb.residual(np.asarray(best["x"]), which, window)[1])
         x = np.asarray(best["x"], float)
     return {"x": best["x"], "cost": best["cost"], "message": "; then ".join(messages), "stages": stages,
             **pb.stats()}
