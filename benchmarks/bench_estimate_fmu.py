@@ -93,6 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--restarts", type=int)
     p.add_argument("--simulations", type=int)
     p.add_argument("--workers", type=int)
+    p.add_argument("--first-window", type=int, help="samples of the first continuation window")
     p.add_argument("--out", default="bench-estimate-fmu")
     p.add_argument("--json", action="store_true", help="also print one JSON object with everything")
     a = p.parse_args(argv)
@@ -117,6 +118,8 @@ def main(argv: list[str] | None = None) -> int:
         cfg = {"fmu": str(REPO / case["fmu"]), "output": "v_in", "approach": a.approach, "seed": 1,
                "parameters": bounds(case["truth"]), "ties": case["ties"], "budget": budget,
                "target": {"kind": "waveforms-csv", "path": str(rec), "values": case["truth"]}}
+        if a.first_window:
+            cfg["first_window"] = a.first_window
         res = run_estimate(cfg, progress=True, out=str(out / f"{name}-{a.approach}"), workers=a.workers)
         worst = max(abs(e) for e in res["errors_percent"].values())
         print(f"   FMU estimate ({a.approach}): worst error {worst:.3g} %, {res['fmu_simulations']} FMU runs "

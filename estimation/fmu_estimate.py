@@ -16,20 +16,25 @@ Config (JSON)::
       "frequency": {"fmin": 20, "fmax": 9000, "points": 200},
       "budget": {"design": 16, "restarts": 3, "simulations": 60},  # LHS points, restarts, runs per restart
       "substeps": 2,            # communication steps per sample for an input FMU (linear input)
-      "diff_step": 1e-3,        # finite-difference step in the unit cube
+      "diff_step": 1e-5,        # finite-difference step in the unit cube
       "seed": 1
     }
 
 Recipe (few evaluations, each a whole FMU run):
 
-1. a Latin-hypercube design of ``budget.design`` points (default ``max(8, 4 n)``,
+1. a Latin-hypercube design of ``budget.design`` points (default ``20 n``,
    :class:`scipy.stats.qmc.LatinHypercube`) in the unit cube (log scale for
-   positive bounds), evaluated in parallel;
-2. from the ``budget.restarts`` best design points, a trust-region least
-   squares (:func:`scipy.optimize.least_squares`, ``trf``, two-point
-   finite-difference Jacobian, bounds of the cube) on the approach's residuals
-   (:mod:`estimation.fmu_problem`), at most ``budget.simulations`` runs each,
-   in parallel;
+   positive bounds), scored on the first continuation window (a 256th of the
+   record: each point costs a 256th of a run), in parallel;
+2. from the ``budget.restarts`` best design points (scored on the time
+   residual of the first window), a trust-region least squares
+   (:func:`scipy.optimize.least_squares`, ``trf``, two-point finite-difference
+   Jacobian, bounds of the cube) per stage of a continuation: the time
+   residual over doubling windows of the record (the first ``first_window``
+   samples, default a 256th of the record, then twice that ...), then over the
+   whole record, then the approach's own residuals (:mod:`estimation.fmu_problem`);
+   at most ``budget.simulations`` runs per stage (default ``10 (n + 1)``), the
+   restarts in parallel;
 3. the verdict of :mod:`estimation.verdict` on the best end point
    (uncertainty from the Fisher information, non-identifiable parameters,
    agreement of the restarts).
@@ -134,7 +139,7 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
              "current": cfg.get("current", "i_in" if inp is None and "i_in" in variables else None),
              "parameters": params, "ties": dict(ties), "target": path_of(tgt.get("path"), "target.path"),
              "approach": approach, "frequency": dict(cfg.get("frequency", {})),
-             "substeps": int(cfg.get("substeps", 2)), "diff_step": float(cfg.get("diff_step", 1e-3)),
+             "substeps": int(cfg.get("substeps", 2)), "diff_step": float(cfg.get("diff_step", 1e-5)),
              "first_window": int(cfg.get("first_window", 0))}
     if not Path(setup["target"]).is_file():
         raise _bad(f"target file not found: {tgt.get('path')}")
@@ -167,9 +172,11 @@ def restart_task(setup: dict[str, Any], x0: list[float], simulations: int) -> di
         stages.insert(-1, ("time", None))
     messages = []
     best: dict[str, Any] = {}
+    start = 0
     for k, (which, window) in enumerate(stages):
-        # the budget is spread evenly over the stages; what a stage leaves goes to the next
-        limit = simulations if k == len(stages) - 1 else int(simulations * (k + 1) / len(stages))
+        # every stage may use ``simulations`` runs (a window of w samples costs w / n of a whole run)
+        start = pb.simulations
+        limit = start + simulations
         best = {"x": [float(v) for v in x], "cost": math.inf}
 
         def fun(z: np.ndarray, which: str = which, limit: int = limit, window: int | None = window) -> np.ndarray:
@@ -239,9 +246,9 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
     names = list(pb.params.varying)
     n = len(names)
     budget = dict(cfg.get("budget", {}))
-    n_design = int(budget.get("design", max(8, 4 * n)))
+    n_design = int(budget.get("design", 20 * n))  # scored on the first window: cheap
     restarts = int(budget.get("restarts", 3))
-    per_restart = int(budget.get("simulations", 20 * (n + 1)))
+    per_restart = int(budget.get("simulations", 10 * (n + 1)))
     if n_design < 1 or restarts < 1 or per_restart < n + 2:
         raise _bad(f"config key 'budget': need design >= 1, restarts >= 1, simulations >= {n + 2}")
     seed = int(cfg.get("seed", 1))

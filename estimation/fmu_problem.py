@@ -226,10 +226,10 @@ class FmuProblem:
         short first window it is smooth; each stage starts from the previous answer
         and doubles the window, so the basin narrows only as the start improves.
         """
-        first = int(self.setup.get("first_window", 0) or max(64, self.n // 32))
+        first = int(self.setup.get("first_window", 0) or max(32, self.n // 256))
         out = []
         w = min(first, self.n)
-        while w < self.n:
+        while 2 * w <= self.n:
             out.append(w)
             w *= 2
         return out
