@@ -94,6 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--simulations", type=int)
     p.add_argument("--workers", type=int)
     p.add_argument("--first-window", type=int, help="samples of the first continuation window")
+    p.add_argument("--probes", action="store_true", help="also compare the internal node voltages (v_mid; v_n2, v_n3)")
     p.add_argument("--out", default="bench-estimate-fmu")
     p.add_argument("--json", action="store_true", help="also print one JSON object with everything")
     a = p.parse_args(argv)
@@ -106,8 +107,10 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         w = record(REPO / case["fmu"], fs, case["duration"])
         rec = out / f"{name}.csv"
-        np.savetxt(rec, np.column_stack([w["time_s"], w["v_bprbs"], w["v_in"], w["i_in"]]), delimiter=",",
-                   header="time_s,v_bprbs,v_in,i_in", comments="", fmt="%.17g")
+        probes = [k for k in w if k.startswith("v_") and k not in ("v_in", "v_bprbs")] if a.probes else []
+        cols = ["v_bprbs", "v_in", "i_in"] + probes
+        np.savetxt(rec, np.column_stack([w["time_s"]] + [w[c] for c in cols]), delimiter=",",
+                   header=",".join(["time_s"] + cols), comments="", fmt="%.17g")
         scores = truth_scores(case, w, fs)
         print(f"== {case['model']}: {Path(case['fmu']).name}, {case['duration'] * 1e3:g} ms at 1 MHz "
               f"(record {time.perf_counter() - t0:.1f} s)")
@@ -115,19 +118,20 @@ def main(argv: list[str] | None = None) -> int:
             print(f"   truth score, {k:<22} {v:.3g} of the signal RMS")
         budget = {k: v for k, v in (("design", a.design), ("restarts", a.restarts), ("simulations", a.simulations))
                   if v is not None}
-        cfg = {"fmu": str(REPO / case["fmu"]), "output": "v_in", "approach": a.approach, "seed": 1,
+        cfg = {"fmu": str(REPO / case["fmu"]), "output": "v_in", "outputs": probes, "approach": a.approach, "seed": 1,
                "parameters": bounds(case["truth"]), "ties": case["ties"], "budget": budget,
                "target": {"kind": "waveforms-csv", "path": str(rec), "values": case["truth"]}}
         if a.first_window:
             cfg["first_window"] = a.first_window
-        res = run_estimate(cfg, progress=True, out=str(out / f"{name}-{a.approach}"), workers=a.workers)
+        tag = f"{name}-{a.approach}{'-probes' if probes else ''}"
+        res = run_estimate(cfg, progress=True, out=str(out / tag), workers=a.workers)
         worst = max(abs(e) for e in res["errors_percent"].values())
-        print(f"   FMU estimate ({a.approach}): worst error {worst:.3g} %, {res['fmu_simulations']} FMU runs "
+        print(f"   FMU estimate ({a.approach}, compared: {', '.join(['v_in'] + probes)}): worst error {worst:.3g} %, {res['fmu_simulations']} FMU runs "
               f"({res['failed_evaluations']} failed), {res['wall_s']:.1f} s, cost {res['cost']:.3g}, "
               f"converged {res['converged']}")
         for k, e in res["errors_percent"].items():
             print(f"     {k:>4} {res['estimate'][k]:12.5g}  {e:+10.4f} %  (1-sigma {100 * res['uncertainty'][k]:.2g} %)")
-        summary[name] = {"truth_scores": scores, "errors_percent": res["errors_percent"], "worst_percent": worst,
+        summary[tag] = {"truth_scores": scores, "errors_percent": res["errors_percent"], "worst_percent": worst,
                          "fmu_simulations": res["fmu_simulations"], "failed_evaluations": res["failed_evaluations"],
                          "wall_s": res["wall_s"], "converged": res["converged"], "cost": res["cost"]}
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
