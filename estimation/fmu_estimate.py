@@ -85,6 +85,19 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
     if unknown:
         raise _bad(f"config key {unknown[0]!r} is not known with 'fmu' (known: {', '.join(sorted(KNOWN))})")
     base = Path(base)
+    for key, kind in (("budget", dict), ("frequency", dict), ("substeps", int), ("first_window", int),
+                      ("seed", int), ("diff_step", (int, float))):
+        if key in cfg and (not isinstance(cfg[key], kind) or isinstance(cfg[key], bool)):
+            raise _bad(f"config key {key!r} has the wrong type ({type(cfg[key]).__name__})")
+    for key, value in dict(cfg.get("budget", {})).items():
+        if key not in ("design", "restarts", "simulations") or not isinstance(value, int) or value < 1:
+            raise _bad(f"config key 'budget': {key!r} must be one of design, restarts, simulations, a positive integer")
+    if "diff_step" in cfg and not 0 < float(cfg["diff_step"]) < 0.5:
+        raise _bad("config key 'diff_step' must lie in (0, 0.5)")
+    if "substeps" in cfg and cfg["substeps"] < 1:
+        raise _bad("config key 'substeps' must be at least 1")
+    if "first_window" in cfg and cfg["first_window"] < 0:
+        raise _bad("config key 'first_window' must be 0 (automatic) or a number of samples")
 
     def path_of(p: Any, key: str) -> str:
         if not isinstance(p, str) or not p:
@@ -189,7 +202,7 @@ def restart_task(setup: dict[str, Any], x0: list[float], simulations: int) -> di
 
         try:
             sol = least_squares(fun, x, jac="2-point", bounds=(0.0, 1.0), method="trf",
-                                diff_step=float(setup["diff_step"]), x_scale=1.0, ftol=1e-12, xtol=1e-10,
+                                diff_step=float(setup["diff_step"]), x_scale="jac", ftol=1e-12, xtol=1e-10,
                                 gtol=1e-12, max_nfev=10 * simulations)
             messages.append(f"{which}{f' ({window} samples)' if window else ''}: {sol.message}")
         except _Spent:
