@@ -195,6 +195,9 @@ def test_fmi3_fmu_in_the_loop(tmp_path):
     ({"output": "v_nowhere"}, "v_nowhere"),
     ({"approach": "spectral"}, "approach"),
     ({"target": {"kind": "waveforms-csv", "path": "missing.csv"}}, "missing.csv"),
+    ({"budget": {"design": "many"}}, "budget"),
+    ({"budget": 5}, "budget"),
+    ({"outputs": ["v_mid"]}, "v_mid"),  # an FMU output the record does not hold
 ])
 def test_bad_fmu_config_one_line(tmp_path, two_record, change, needle):
     cfg = _fmu_cfg(two_record)
