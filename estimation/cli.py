@@ -19,7 +19,7 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
     ``non_identifiable``, ``cost``, ``wall_s`` ...; ``thesis``: the thesis's
     numbers; ``checks``); otherwise the comparison table. Progress on stderr.
 
-``pris-cosim estimate --config FILE.json [--json]``
+``pris-cosim estimate --config FILE.json [--json] [--out DIR] [--scheduler ADDR] [--workers N] [--quiet]``
     One estimation described by a JSON file::
 
         {
@@ -40,12 +40,21 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
           "frequency": {"fmin": 20, "fmax": 9000, "points": 200},   # default band: see estimation.estimate
           "source": {"vdc": 30, "prbs_order": 12, "fclk": 1e4, "rpris": 31800, "lpris": 2.53, "cpris": 1e-8},
           "fs": 300000, "duration": 0.3,          # simulated perturbation: sampling rate (Hz), record (s)
+          "drive": "auto",                        # waveform records: "bridge" (recorded v_bprbs through the
+                                                  # source's RLC; default when "source" is given), "current"
+                                                  # (sampled current held linearly), see estimation.drives
           "cost": "sse",                          # "sse" (4.21), "rmse" (4.29/4.32/4.39/4.45), "correlation"
           "optimiser": "ga+local",                # stage 1: any estimation.optimisers.minimize method
           "options": {},                          # its options (default: estimation.estimate.default_plan)
           "budget": {"max_evals": 20000, "max_time_s": 60, "restarts": 3},
           "seed": 1
         }
+
+    A ``"netlist": FILE`` with ``"port": NODE`` replaces ``"model"`` (parameters: element or
+    ``.param`` names). An ``"fmu": FILE`` config (FMI 2.0/3.0 Co-Simulation in the loop, keys
+    ``input``, ``output``, ``outputs``, ``current``, ``parameters``, ``ties``, ``target``,
+    ``approach``, ``budget``, ``substeps``, ``diff_step``, ``first_window``, ``seed``) goes to
+    :mod:`estimation.fmu_estimate`; ``--out DIR``, ``--scheduler``, ``--workers`` apply to it.
 
     Defaults (``estimation.estimate``): GA + L-BFGS-B sized to the number of
     parameters, a least-squares polish on the approach's own residuals, 3
