@@ -94,25 +94,28 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--simulations", type=int)
     p.add_argument("--workers", type=int)
     p.add_argument("--first-window", type=int, help="samples of the first continuation window")
+    p.add_argument("--fs", type=float, default=1e6, help="sampling frequency of the records, Hz (default 1 MHz)")
+    p.add_argument("--duration", type=float, help="record length, s (default: 50 ms two-section, 10 ms three-section)")
     p.add_argument("--probes", action="store_true", help="also compare the internal node voltages (v_mid; v_n2, v_n3)")
     p.add_argument("--out", default="bench-estimate-fmu")
     p.add_argument("--json", action="store_true", help="also print one JSON object with everything")
     a = p.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    fs = 1e6
+    fs = a.fs
     summary = {}
     for name in a.cases.split(","):
         case = CASES[name]
         t0 = time.perf_counter()
-        w = record(REPO / case["fmu"], fs, case["duration"])
+        duration = a.duration or case["duration"]
+        w = record(REPO / case["fmu"], fs, duration)
         rec = out / f"{name}.csv"
         probes = [k for k in w if k.startswith("v_") and k not in ("v_in", "v_bprbs")] if a.probes else []
         cols = ["v_bprbs", "v_in", "i_in"] + probes
         np.savetxt(rec, np.column_stack([w["time_s"]] + [w[c] for c in cols]), delimiter=",",
                    header=",".join(["time_s"] + cols), comments="", fmt="%.17g")
         scores = truth_scores(case, w, fs)
-        print(f"== {case['model']}: {Path(case['fmu']).name}, {case['duration'] * 1e3:g} ms at 1 MHz "
+        print(f"== {case['model']}: {Path(case['fmu']).name}, {duration * 1e3:g} ms at {fs / 1e6:g} MHz "
               f"(record {time.perf_counter() - t0:.1f} s)")
         for k, v in scores.items():
             print(f"   truth score, {k:<22} {v:.3g} of the signal RMS")
@@ -123,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
                "target": {"kind": "waveforms-csv", "path": str(rec), "values": case["truth"]}}
         if a.first_window:
             cfg["first_window"] = a.first_window
-        tag = f"{name}-{a.approach}{'-probes' if probes else ''}"
+        tag = f"{name}-{a.approach}{'-probes' if probes else ''}-{fs / 1e6:g}MHz-{duration * 1e3:g}ms"
         res = run_estimate(cfg, progress=True, out=str(out / tag), workers=a.workers)
         worst = max(abs(e) for e in res["errors_percent"].values())
         print(f"   FMU estimate ({a.approach}, compared: {', '.join(['v_in'] + probes)}): worst error {worst:.3g} %, {res['fmu_simulations']} FMU runs "
