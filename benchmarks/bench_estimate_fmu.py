@@ -130,12 +130,13 @@ def main(argv: list[str] | None = None) -> int:
         res = run_estimate(cfg, progress=True, out=str(out / tag), workers=a.workers)
         worst = max(abs(e) for e in res["errors_percent"].values())
         print(f"   FMU estimate ({a.approach}, compared: {', '.join(['v_in'] + probes)}): worst error {worst:.3g} %, {res['fmu_simulations']} FMU runs "
-              f"({res['failed_evaluations']} failed), {res['wall_s']:.1f} s, cost {res['cost']:.3g}, "
+              f"({res['failed_evaluations']} failed; {res['fmu_record_equivalents']:.0f} whole-record equivalents), {res['wall_s']:.1f} s, cost {res['cost']:.3g}, "
               f"converged {res['converged']}" + ("" if res["converged"] else f" ({res['convergence_reason']})"))
         for k, e in res["errors_percent"].items():
             print(f"     {k:>4} {res['estimate'][k]:12.5g}  {e:+10.4f} %  (1-sigma {100 * res['uncertainty'][k]:.2g} %)")
         summary[tag] = {"truth_scores": scores, "errors_percent": res["errors_percent"], "worst_percent": worst,
-                         "fmu_simulations": res["fmu_simulations"], "failed_evaluations": res["failed_evaluations"],
+                         "fmu_simulations": res["fmu_simulations"],
+                        "fmu_record_equivalents": res["fmu_record_equivalents"], "failed_evaluations": res["failed_evaluations"],
                          "wall_s": res["wall_s"], "converged": res["converged"], "cost": res["cost"]}
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     if a.json:

@@ -244,7 +244,8 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
     Returns
     -------
     dict
-        ``estimate``, ``cost``, ``fmu_simulations``, ``failed_evaluations``,
+        ``estimate``, ``cost``, ``fmu_simulations`` (runs of any window), ``fmu_record_equivalents``
+        (simulated samples over the record's), ``failed_evaluations``,
         ``wall_s``, the verdict (``converged``, ``uncertainty``, ``non_identifiable`` ...),
         ``restarts``, ``errors_percent`` when the target gives true ``values``.
     """
@@ -292,6 +293,7 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
     v = verdict(pb.residuals, pb.params, xb, pb.data(), end_points)
     sims += pb.simulations
     fails += pb.model.failures
+    samples = sum(int(r.get("samples", 0)) for r in list(res) + list(ends)) + pb.model.samples
     est = pb.values(xb)
     answer: dict[str, Any] = {
         "fmu": Path(setup["fmu"]).name, "approach": setup["approach"],
@@ -300,6 +302,7 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
         if setup["input"] else None,
         "estimate": {k: est[k] for k in names}, "tied": {k: est[k] for k in setup["ties"]},
         "cost": float(ends[best]["cost"]), "fmu_simulations": sims, "failed_evaluations": fails,
+        "fmu_record_equivalents": samples / pb.n,
         "wall_s": time.perf_counter() - t0, "converged": v["converged"],
         "convergence_reason": v["convergence_reason"], "uncertainty": v["uncertainty"],
         "non_identifiable": v["non_identifiable"],

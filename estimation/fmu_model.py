@@ -92,6 +92,8 @@ class FmuModel:
     ----------
     simulations : int
         Runs started.
+    samples : int
+        Samples simulated over all runs.
     failures : int
         Runs that failed (call error, NaN, divergence).
     last_error : str
@@ -129,6 +131,7 @@ class FmuModel:
         self._tmp = extract(str(self.path))
         self.instance: Any = None
         self.simulations = 0
+        self.samples = 0
         self.failures = 0
         self.last_error = ""
         self._used = False
@@ -195,6 +198,7 @@ class FmuModel:
             ``(len(outputs), n)``.
         """
         self.simulations += 1
+        self.samples += int(n)
         if self.instance is None:
             self._instantiate()
         try:

@@ -290,11 +290,11 @@ class FmuProblem:
 
     def stats(self) -> dict[str, Any]:
         return {"simulations": self.simulations, "failures": self.model.failures, "seconds": self.seconds,
-                "last_error": self.model.last_error}
+                "samples": self.model.samples, "last_error": self.model.last_error}
 
     def reset_stats(self) -> None:
         self.simulations, self.seconds = 0, 0.0
-        self.model.failures = 0
+        self.model.failures = self.model.samples = 0
 
 
 _PROBLEMS: dict[str, FmuProblem] = {}
