@@ -96,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--first-window", type=int, help="samples of the first continuation window")
     p.add_argument("--fs", type=float, default=1e6, help="sampling frequency of the records, Hz (default 1 MHz)")
     p.add_argument("--duration", type=float, help="record length, s (default: 50 ms two-section, 10 ms three-section)")
+    p.add_argument("--design-score", choices=["window", "frequency"], help="what ranks the design points")
     p.add_argument("--probes", action="store_true", help="also compare the internal node voltages (v_mid; v_n2, v_n3)")
     p.add_argument("--out", default="bench-estimate-fmu")
     p.add_argument("--json", action="store_true", help="also print one JSON object with everything")
@@ -124,6 +125,8 @@ def main(argv: list[str] | None = None) -> int:
         cfg = {"fmu": str(REPO / case["fmu"]), "output": "v_in", "outputs": probes, "approach": a.approach, "seed": 1,
                "parameters": bounds(case["truth"]), "ties": case["ties"], "budget": budget,
                "target": {"kind": "waveforms-csv", "path": str(rec), "values": case["truth"]}}
+        if a.design_score:
+            cfg["design_score"] = a.design_score
         if a.first_window:
             cfg["first_window"] = a.first_window
         tag = f"{name}-{a.approach}{'-probes' if probes else ''}-{fs / 1e6:g}MHz-{duration * 1e3:g}ms"

@@ -66,7 +66,7 @@ from .fmu_problem import APPROACHES, problem
 __all__ = ["make_setup", "run_fmu_estimate", "design_task", "restart_task"]
 
 KNOWN = {"fmu", "input", "output", "outputs", "current", "parameters", "ties", "target", "approach", "frequency",
-         "budget", "substeps", "diff_step", "seed", "first_window"}
+         "budget", "substeps", "diff_step", "seed", "first_window", "design_score"}
 
 
 def _bad(text: str) -> FmuSetupError:
@@ -153,7 +153,7 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
              "parameters": params, "ties": dict(ties), "target": path_of(tgt.get("path"), "target.path"),
              "approach": approach, "frequency": dict(cfg.get("frequency", {})),
              "substeps": int(cfg.get("substeps", 2)), "diff_step": float(cfg.get("diff_step", 1e-5)),
-             "first_window": int(cfg.get("first_window", 0))}
+             "first_window": int(cfg.get("first_window", 0)), "design_score": cfg.get("design_score", "window")}
     if not Path(setup["target"]).is_file():
         raise _bad(f"target file not found: {tgt.get('path')}")
     problem(setup)  # reads the record and instantiates the FMU here: every setup error now, in one line
@@ -164,6 +164,9 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
 def design_task(setup: dict[str, Any], points: list[list[float]]) -> dict[str, Any]:
     """Costs of design points (unit cube) with the worker's FMU instance."""
     pb = problem(setup)
+    if setup.get("design_score") == "frequency" and pb.has_frequency:
+        costs = [pb.residual(np.asarray(x, float), "frequency")[1] for x in points]
+        return {"costs": costs, "scored_on": "frequency", **pb.stats()}
     wins = pb.windows()
     w = wins[0] if wins else None
     costs = [pb.residual(np.asarray(x, float), "time", w)[1] for x in points]
