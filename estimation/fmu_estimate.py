@@ -96,6 +96,8 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
         raise _bad("config key 'diff_step' must lie in (0, 0.5)")
     if "substeps" in cfg and cfg["substeps"] < 1:
         raise _bad("config key 'substeps' must be at least 1")
+    if cfg.get("design_score", "window") not in ("window", "frequency"):
+        raise _bad("config key 'design_score' must be 'window' or 'frequency'")
     if "first_window" in cfg and cfg["first_window"] < 0:
         raise _bad("config key 'first_window' must be 0 (automatic) or a number of samples")
 

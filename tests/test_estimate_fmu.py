@@ -197,6 +197,7 @@ def test_fmi3_fmu_in_the_loop(tmp_path):
     ({"target": {"kind": "waveforms-csv", "path": "missing.csv"}}, "missing.csv"),
     ({"budget": {"design": "many"}}, "budget"),
     ({"budget": 5}, "budget"),
+    ({"design_score": "luck"}, "design_score"),
     ({"outputs": ["v_mid"]}, "v_mid"),  # an FMU output the record does not hold
 ])
 def test_bad_fmu_config_one_line(tmp_path, two_record, change, needle):
