@@ -309,9 +309,13 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
         if workers is not None and workers < 1:
             raise EstimationInputError(f"--workers must be at least 1 (got {workers})")
         try:
-            return run_fmu_estimate(cfg, out=out, scheduler=scheduler, workers=workers, progress=progress, base=base)
+            answer = run_fmu_estimate(cfg, out=out, scheduler=scheduler, workers=workers, progress=progress,
+                                      base=base)
         except FmuSetupError as exc:
             raise EstimationInputError(str(exc)) from None
+        if not answer["converged"]:
+            print(f"warning: estimate not converged: {answer['convergence_reason']}", file=sys.stderr, flush=True)
+        return answer
     from pris_cosim import timedomain as td
     from pris_cosim.arrangement import SourceSettings
     from pris_cosim.measured import read_response_csv, read_waveform_csv
