@@ -155,6 +155,10 @@ def test_fmu_estimate_recovers_and_resumes(tmp_path, two_record):
     b = run_estimate(_fmu_cfg(two_record), progress=False, out=str(out), workers=2)  # all stored: nothing re-run
     assert b["estimate"] == a["estimate"]
     assert b["fmu_simulations"] == a["fmu_simulations"]
+    (out / "runs" / "restart-2.json").unlink()  # as if interrupted before the second restart was stored
+    c = run_estimate(_fmu_cfg(two_record), progress=False, out=str(out), scheduler="serial")
+    assert c["estimate"] == a["estimate"]
+    assert (out / "runs" / "restart-2.json").is_file()
 
 
 @pytest.mark.parametrize("approach", ["iemd", "emd", "frequency"])
