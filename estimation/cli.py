@@ -241,7 +241,8 @@ def load_config(path: str | Path) -> dict[str, Any]:
         raise EstimationInputError(f"config {path} must hold a JSON object")
     known = {"model", "netlist", "port", "parameters", "ties", "target", "approach", "responses", "frequency", "source", "fs",
              "duration", "cost", "optimiser", "options", "budget", "seed", "configuration", "drive", "fmu", "input",
-             "output", "outputs", "current", "substeps", "diff_step", "first_window", "design_score"}
+             "output", "outputs", "current", "substeps", "diff_step", "first_window", "design_score",
+             "window_growth"}
     unknown = sorted(set(cfg) - known)
     if unknown:
         raise EstimationInputError(f"config key {unknown[0]!r} is not known (known: {', '.join(sorted(known))})")

@@ -66,7 +66,7 @@ from .fmu_problem import APPROACHES, problem
 __all__ = ["make_setup", "run_fmu_estimate", "design_task", "restart_task"]
 
 KNOWN = {"fmu", "input", "output", "outputs", "current", "parameters", "ties", "target", "approach", "frequency",
-         "budget", "substeps", "diff_step", "seed", "first_window", "design_score"}
+         "budget", "substeps", "diff_step", "seed", "first_window", "design_score", "window_growth"}
 
 
 def _bad(text: str) -> FmuSetupError:
@@ -96,6 +96,9 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
         raise _bad("config key 'diff_step' must lie in (0, 0.5)")
     if "substeps" in cfg and cfg["substeps"] < 1:
         raise _bad("config key 'substeps' must be at least 1")
+    growth = cfg.get("window_growth", 2.0)
+    if not isinstance(growth, (int, float)) or isinstance(growth, bool) or not 1.05 <= growth <= 16:
+        raise _bad("config key 'window_growth' must be a number from 1.05 to 16")
     if cfg.get("design_score", "window") not in ("window", "frequency"):
         raise _bad("config key 'design_score' must be 'window' or 'frequency'")
     if "first_window" in cfg and cfg["first_window"] < 0:
@@ -155,7 +158,8 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
              "parameters": params, "ties": dict(ties), "target": path_of(tgt.get("path"), "target.path"),
              "approach": approach, "frequency": dict(cfg.get("frequency", {})),
              "substeps": int(cfg.get("substeps", 2)), "diff_step": float(cfg.get("diff_step", 1e-5)),
-             "first_window": int(cfg.get("first_window", 0)), "design_score": cfg.get("design_score", "window")}
+             "first_window": int(cfg.get("first_window", 0)), "design_score": cfg.get("design_score", "window"),
+             "window_growth": float(cfg.get("window_growth", 2.0))}
     if not Path(setup["target"]).is_file():
         raise _bad(f"target file not found: {tgt.get('path')}")
     problem(setup)  # reads the record and instantiates the FMU here: every setup error now, in one line

@@ -227,11 +227,13 @@ class FmuProblem:
         and doubles the window, so the basin narrows only as the start improves.
         """
         first = int(self.setup.get("first_window", 0) or max(32, self.n // 256))
-        out = []
-        w = min(first, self.n)
-        while 2 * w <= self.n:
-            out.append(w)
-            w *= 2
+        growth = float(self.setup.get("window_growth", 2.0))
+        out: list[int] = []
+        w = float(min(first, self.n))
+        while growth * w <= self.n:
+            if not out or int(w) > out[-1]:
+                out.append(int(w))
+            w *= growth
         return out
 
     def residual(self, x: np.ndarray, which: str | None = None, window: int | None = None
