@@ -145,8 +145,9 @@ def _batched_zoh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np
     return e[:, :n, :n], e[:, :n, n:]
 
 
-def _blocked_states(Phi: np.ndarray, g: np.ndarray, u: np.ndarray, block: int = 64) -> np.ndarray:
-    """States of ``x[k+1] = Phi x[k] + g u[k]`` from ``x[0] = 0`` for a population.
+def _blocked_states(Phi: np.ndarray, g: np.ndarray, u: np.ndarray, block: int = 64,
+                    x0: np.ndarray | None = None) -> np.ndarray:
+    """States of ``x[k+1] = Phi x[k] + g u[k]`` from ``x[0] = x0`` (default 0) for a population.
 
     Parameters
     ----------
@@ -160,6 +161,8 @@ def _blocked_states(Phi: np.ndarray, g: np.ndarray, u: np.ndarray, block: int = 
         Steps per block: inside a block the forced response is one batched
         matrix product with the block-Toeplitz matrix of ``Phi^j g``; only the
         block boundaries are stepped sequentially.
+    x0 : numpy.ndarray, optional
+        ``(P, n)`` initial states.
 
     Returns
     -------
@@ -188,7 +191,7 @@ def _blocked_states(Phi: np.ndarray, g: np.ndarray, u: np.ndarray, block: int = 
     end_forced = (ub @ rev).reshape(nblk, P, n).transpose(1, 0, 2)  # sum_i Phi^(L-1-i) g u_i
     PhiL = Pw[L]
     starts = np.empty((P, nblk, n))
-    x = np.zeros((P, n, 1))
+    x = np.zeros((P, n, 1)) if x0 is None else np.array(x0, float).reshape(P, n, 1)
     for b in range(nblk):
         starts[:, b] = x[:, :, 0]
         x = PhiL @ x + end_forced[:, b, :, None]
@@ -331,21 +334,32 @@ class InjectionEngine:
     port : str
         Node the current enters (from ground).
     i_samples : array_like, A
-        Current samples; sample k holds from ``k / fs`` to ``(k + 1) / fs``.
+        Current samples ``i(k / fs)``.
     fs : float, Hz
     block : int
         Samples per block of the blocked recurrence.
+    hold : {"linear", "step"}
+        ``"linear"`` (default): the current varies linearly from one sample to
+        the next (first-order hold, :mod:`estimation.holds`): unbiased for the
+        continuous current of a physical source. ``"step"``: sample k holds
+        from ``k / fs`` to ``(k + 1) / fs`` (zero-order hold, thesis 4.2.3, as
+        :func:`pris_cosim.timedomain.simulate_current_injection`), which
+        delays the current by half a sample.
 
     Notes
     -----
-    Exact for the piecewise-constant current, from zero state, like
-    :func:`pris_cosim.timedomain.simulate_current_injection`. Inside a block
+    Exact for the piecewise-linear (or piecewise-constant) current, from zero
+    state. Inside a block
     of ``L`` samples the response is a product with the block-Toeplitz matrix
     of the Markov parameters ``C Phi^j Gamma``; the state is carried from
     block to block (one batched matrix product per block).
     """
 
-    def __init__(self, dut: Circuit, port: str, i_samples: np.ndarray, fs: float, block: int = 64):
+    def __init__(self, dut: Circuit, port: str, i_samples: np.ndarray, fs: float, block: int = 64,
+                 hold: str = "linear"):
+        if hold not in ("linear", "step"):
+            raise ApproachError(f"hold must be 'linear' or 'step' (got {hold!r})")
+        self.hold = hold
         self.circuit = dut
         self.port = dut.require_node(port, "port")
         if self.port == GROUND:
@@ -374,11 +388,20 @@ class InjectionEngine:
         ok = _values_finite(values, P) & np.all(np.isfinite(A.reshape(P, -1)), axis=1)
         A = np.where(ok[:, None, None], A, 0.0)
         B = np.where(ok[:, None, None], B, 0.0)
-        Phi, Gam = _batched_zoh(A, B, 1.0 / self.fs)
-        g = Gam[:, :, 0]
         with np.errstate(over="ignore", invalid="ignore"):
-            x = _blocked_states(Phi, g, self.i, self.block)  # (P, K, n)
-            y = np.matmul(x, C[:, 0, :, None])[:, :, 0] + D[:, 0, 0][:, None] * self.i[None, :]
+            if self.hold == "step":
+                Phi, Gam = _batched_zoh(A, B, 1.0 / self.fs)
+                x = _blocked_states(Phi, Gam[:, :, 0], self.i, self.block)  # (P, K, n)
+                Dt = D[:, 0, 0]
+            else:  # first-order hold: z_k = x_k - Gamma1 u_k, x_0 = 0
+                from .holds import batched_foh, foh_recurrence
+
+                Phi, G0, G1 = batched_foh(A, B, 1.0 / self.fs)
+                g1 = G1[:, :, 0]
+                x = _blocked_states(Phi, foh_recurrence(Phi, G0[:, :, 0], g1), self.i, self.block,
+                                    x0=-g1 * self.i[0])
+                Dt = D[:, 0, 0] + np.einsum("pn,pn->p", C[:, 0, :], g1)
+            y = np.matmul(x, C[:, 0, :, None])[:, :, 0] + Dt[:, None] * self.i[None, :]
         y[~ok] = np.nan
         return y
 

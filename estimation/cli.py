@@ -19,7 +19,7 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
     ``non_identifiable``, ``cost``, ``wall_s`` ...; ``thesis``: the thesis's
     numbers; ``checks``); otherwise the comparison table. Progress on stderr.
 
-``pris-cosim estimate --config FILE.json [--json]``
+``pris-cosim estimate --config FILE.json [--json] [--out DIR] [--scheduler ADDR] [--workers N] [--quiet]``
     One estimation described by a JSON file::
 
         {
@@ -40,12 +40,21 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
           "frequency": {"fmin": 20, "fmax": 9000, "points": 200},   # default band: see estimation.estimate
           "source": {"vdc": 30, "prbs_order": 12, "fclk": 1e4, "rpris": 31800, "lpris": 2.53, "cpris": 1e-8},
           "fs": 300000, "duration": 0.3,          # simulated perturbation: sampling rate (Hz), record (s)
+          "drive": "auto",                        # waveform records: "bridge" (recorded v_bprbs through the
+                                                  # source's RLC; default when "source" is given), "current"
+                                                  # (sampled current held linearly), see estimation.drives
           "cost": "sse",                          # "sse" (4.21), "rmse" (4.29/4.32/4.39/4.45), "correlation"
           "optimiser": "ga+local",                # stage 1: any estimation.optimisers.minimize method
           "options": {},                          # its options (default: estimation.estimate.default_plan)
           "budget": {"max_evals": 20000, "max_time_s": 60, "restarts": 3},
           "seed": 1
         }
+
+    A ``"netlist": FILE`` with ``"port": NODE`` replaces ``"model"`` (parameters: element or
+    ``.param`` names). An ``"fmu": FILE`` config (FMI 2.0/3.0 Co-Simulation in the loop, keys
+    ``input``, ``output``, ``outputs``, ``current``, ``parameters``, ``ties``, ``target``,
+    ``approach``, ``budget``, ``substeps``, ``diff_step``, ``first_window``, ``seed``) goes to
+    :mod:`estimation.fmu_estimate`; ``--out DIR``, ``--scheduler``, ``--workers`` apply to it.
 
     Defaults (``estimation.estimate``): GA + L-BFGS-B sized to the number of
     parameters, a least-squares polish on the approach's own residuals, 3
@@ -231,11 +240,28 @@ def load_config(path: str | Path) -> dict[str, Any]:
     if not isinstance(cfg, dict):
         raise EstimationInputError(f"config {path} must hold a JSON object")
     known = {"model", "netlist", "port", "parameters", "ties", "target", "approach", "responses", "frequency", "source", "fs",
-             "duration", "cost", "optimiser", "options", "budget", "seed", "configuration"}
+             "duration", "cost", "optimiser", "options", "budget", "seed", "configuration", "drive", "fmu", "input",
+             "output", "outputs", "current", "substeps", "diff_step", "first_window", "design_score",
+             "window_growth"}
     unknown = sorted(set(cfg) - known)
     if unknown:
         raise EstimationInputError(f"config key {unknown[0]!r} is not known (known: {', '.join(sorted(known))})")
     return cfg
+
+
+def _read_record(tgt: dict[str, Any]) -> Any:
+    """The waveform record of a ``waveforms-csv`` target (one-line errors naming the file)."""
+    from pris_cosim.measured import read_waveform_csv
+
+    path = tgt.get("path")
+    if not isinstance(path, str):
+        raise EstimationInputError("target key 'path' must name the waveform CSV file")
+    if not Path(path).is_file():
+        raise EstimationInputError(f"target file not found: {path}")
+    try:
+        return read_waveform_csv(path)
+    except ValueError as exc:
+        raise EstimationInputError(f"{path}: {exc}") from None
 
 
 def _parameter_set(model: Any, cfg: dict[str, Any]) -> Any:
@@ -270,8 +296,27 @@ def _parameter_set(model: Any, cfg: dict[str, Any]) -> Any:
     return ps
 
 
-def run_estimate(cfg: dict[str, Any], progress: bool = True) -> dict[str, Any]:
-    """One estimation from a configuration dictionary (see the module docstring)."""
+def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = None, scheduler: str | None = None,
+                 workers: int | None = None, base: str | Path = ".") -> dict[str, Any]:
+    """One estimation from a configuration dictionary (see the module docstring).
+
+    A config with ``"fmu"`` goes to :func:`estimation.fmu_estimate.run_fmu_estimate` (``out``,
+    ``scheduler``, ``workers`` apply to it; relative paths are taken from ``base``).
+    """
+    if "fmu" in cfg:
+        from .fmu_estimate import run_fmu_estimate
+        from .fmu_model import FmuSetupError
+
+        if workers is not None and workers < 1:
+            raise EstimationInputError(f"--workers must be at least 1 (got {workers})")
+        try:
+            answer = run_fmu_estimate(cfg, out=out, scheduler=scheduler, workers=workers, progress=progress,
+                                      base=base)
+        except FmuSetupError as exc:
+            raise EstimationInputError(str(exc)) from None
+        if not answer["converged"]:
+            print(f"warning: estimate not converged: {answer['convergence_reason']}", file=sys.stderr, flush=True)
+        return answer
     from pris_cosim import timedomain as td
     from pris_cosim.arrangement import SourceSettings
     from pris_cosim.measured import read_response_csv, read_waveform_csv
@@ -356,14 +401,18 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True) -> dict[str, Any]:
                 else:
                     eng = ap.PrisEngine(circuit, conf.port, source, fs, n)
                     approach = ap.SimulatedFrequency(params, eng, specs, welch, bins, target, cost)
+        elif kind == "waveforms-csv":
+            approach, proxy = _frequency_from_record(approach_name, params, model, conf, source, _read_record(tgt),
+                                                     "source" in cfg, metric, fmin, fmax, points)
         else:
             raise EstimationInputError(f"target kind {kind!r} does not suit approach {approach_name!r}")
     elif approach_name in ("time", "emd", "iemd"):
         probe_w: dict[str, np.ndarray] = {}
+        v_bprbs: np.ndarray | None = None
         if kind == "waveforms-csv":
-            wf = read_waveform_csv(tgt["path"])
-            i_in, v_in = wf.i_in, wf.v_in
-            fs = 1.0 / float(np.mean(np.diff(wf.time_s)))
+            wf = _read_record(tgt)
+            i_in, v_in, v_bprbs = wf.i_in, wf.v_in, wf.v_bprbs
+            fs = wf.fs
         elif kind == "simulated":
             periods = max(1, -(-int(round(duration * source.fclk)) // (2 ** source.prbs_order - 1)))
             w = td.simulate_pris(circuit, conf.port, source, fs, periods=periods, overrides=values or None)
@@ -372,22 +421,70 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True) -> dict[str, Any]:
             probe_w = {k: v[:n] for k, v in w.items() if k.startswith("v_") and k not in ("v_in", "v_bprbs")}
         else:
             raise EstimationInputError(f"target kind {kind!r} does not suit approach {approach_name!r}")
+        from .drives import choose_drive
+
+        try:
+            drive = choose_drive(_need(cfg, "drive", str, "auto"), "source" in cfg, v_bprbs is not None)
+        except ValueError as exc:
+            raise EstimationInputError(str(exc)) from None
         approach, proxy = _time_approach(approach_name, params, model, conf, source, fs, i_in, v_in, kind,
-                                         metric, fmin, fmax, probe_w)
+                                         metric, fmin, fmax, probe_w, v_bprbs if drive == "bridge" else None)
     else:
         raise EstimationInputError(f"approach must be frequency, frequency-simulated, time, emd or iemd (got {approach_name!r})")
     return _fit_and_report(cfg, approach, params, model, approach_name, metric, known_target, t0, progress,
                            proxy)
 
 
+def _frequency_from_record(name: str, params: Any, model: Any, conf: Any, source: Any, wf: Any, source_known: bool,
+                           metric: str, fmin: float, fmax: float, points: int) -> Any:
+    """Frequency approaches against a waveform record's own Welch H1 ``Zin`` (bins with coherence >= 0.99).
+
+    ``frequency``: the estimate's analytic ``Zin``; ``frequency-simulated``: the estimate's PRIS
+    waveforms driven by the record's bridge voltage through the source's RLC (config ``source``
+    required), through the same Welch estimator, with the analytic one as its stage-1 stand-in.
+
+    Returns
+    -------
+    (approach, stand-in or None)
+    """
+    from . import approaches as ap
+    from .drives import RecordBridgeEngine
+
+    fs, n = wf.fs, wf.n_samples
+    welch = ap.WelchSettings()
+    nper = welch.segment(n)
+    lo, hi = max(fmin, 2 * fs / nper), min(fmax, fs / 4)
+    if not hi > lo:
+        raise EstimationInputError(f"frequency band {fmin:g}..{fmax:g} Hz is empty for this record")
+    bins, f = ap.bin_frequencies(fs, nper, lo, hi, points)
+    w = {"i_in": wf.i_in, "v_in": wf.v_in}
+    spec = [ap.ZIN_SPEC["Zin"]]
+    _, resp, coh = ap.responses_from_waveforms(w, fs, spec, welch, bins)
+    keep = (coh["Zin"] >= 0.99) & np.isfinite(resp["Zin"]) & (np.abs(resp["Zin"]) > 0)
+    if keep.sum() < 5:
+        raise EstimationInputError("fewer than 5 frequency bins of the record have coherence >= 0.99")
+    target = {"Zin": resp["Zin"][keep]}
+    cost = ap.frequency_cost(metric, ["Zin"])
+    analytic = ap.AnalyticFrequency(params, model.response_set([conf.name]), f[keep], target, cost)
+    if name == "frequency":
+        return analytic, None
+    if not source_known:
+        raise EstimationInputError("approach 'frequency-simulated' on a waveform record needs the source's R, L, C "
+                                   "(config key 'source')")
+    eng = RecordBridgeEngine(model.circuit, conf.port, source, fs, wf.v_bprbs, probes=[])
+    return ap.SimulatedFrequency(params, eng, spec, welch, bins[keep], target, cost), analytic
+
+
 def _time_approach(name: str, params: Any, model: Any, conf: Any, source: Any, fs: float, i_in: np.ndarray,
                    v_in: np.ndarray, kind: str, metric: str, fmin: float, fmax: float,
-                   probes: dict[str, np.ndarray]) -> tuple[Any, Any]:
+                   probes: dict[str, np.ndarray], v_bprbs: np.ndarray | None = None) -> tuple[Any, Any]:
     """Time/EMD/IEMD approach and its stage-1 stand-in (:func:`estimation.estimate.waveform_proxy`).
 
     A simulated target is compared with the estimate driven by the same commanded bridge voltage
-    through the source's series RLC (exact: the true parameters score zero); a measured record
-    with its sampled current injected at the port (thesis 4.2.3).
+    through the source's series RLC (exact: the true parameters score zero); a recorded one
+    by its recorded bridge voltage ``v_bprbs`` through the source's RLC when given (exact when
+    the bridge switches on sample instants), else by its sampled current injected at the port,
+    held linearly between samples (:mod:`estimation.drives`).
     """
     from . import approaches as ap
     from . import estimate as es
@@ -399,10 +496,19 @@ def _time_approach(name: str, params: Any, model: Any, conf: Any, source: Any, f
         cls: Any = {"time": es.RecordTime, "emd": es.RecordEMD, "iemd": es.RecordIEMD}[name]
         approach = cls(params, eng, v_in, m, chunk=16)
         approach.probe_targets = dict(probes)
+    elif v_bprbs is not None:
+        from .drives import RecordBridgeEngine
+
+        eng = RecordBridgeEngine(model.circuit, conf.port, source, fs, v_bprbs, probes=[k[2:] for k in probes])
+        cls = {"time": es.RecordTime, "emd": es.RecordEMD, "iemd": es.RecordIEMD}[name]
+        approach = cls(params, eng, v_in, m, chunk=16)
+        approach.probe_targets = dict(probes)
+        approach.engine = approach.engine.replace("zoh-bridge", "recorded-bridge")
     else:
-        eng = ap.InjectionEngine(model.circuit, conf.port, i_in, fs)
+        eng = ap.InjectionEngine(model.circuit, conf.port, i_in, fs, hold="linear")
         cls = {"time": ap.TimeDomain, "emd": ap.EMDApproach, "iemd": ap.IEMDApproach}[name]
         approach = cls(params, eng, v_in, m)
+        approach.engine = approach.engine.replace("zoh-injection", "foh-injection")
     return approach, es.waveform_proxy(params, model.response_set([conf.name]), i_in, v_in, fs, fmin, fmax,
                                        configuration=conf, probes=probes)
 
@@ -453,14 +559,20 @@ def _fit_and_report(cfg: dict[str, Any], approach: Any, params: Any, model: Any,
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
-    out = run_estimate(load_config(args.config), progress=not getattr(args, "quiet", False))
+    out = run_estimate(load_config(args.config), progress=not getattr(args, "quiet", False),
+                       out=getattr(args, "out", None), scheduler=getattr(args, "scheduler", None),
+                       workers=getattr(args, "workers", None))
     if args.json:
         emit(out)
     else:
         for k, v in out["estimate"].items():
             e = out.get("errors_percent", {}).get(k)
             print(f"{k:>8} {v:14.6g}" + (f"  {e:+9.3f} %" if e is not None else ""))
-        print(f"cost {out['cost']:.6g}, {out['nfev']} evaluations, {out['wall_s']:.1f} s ({out['engine']})")
+        if "fmu_simulations" in out:
+            print(f"cost {out['cost']:.6g}, {out['fmu_simulations']} FMU runs ({out['failed_evaluations']} failed), "
+                  f"{out['wall_s']:.1f} s; results in {out['out']}")
+        else:
+            print(f"cost {out['cost']:.6g}, {out['nfev']} evaluations, {out['wall_s']:.1f} s ({out['engine']})")
     return 0
 
 
@@ -490,4 +602,9 @@ def register(subparsers: Any) -> None:
     q = subparsers.add_parser("estimate", help="one estimation from a JSON configuration")
     q.add_argument("--config", required=True, metavar="FILE.json")
     q.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    q.add_argument("--out", metavar="DIR", help="FMU estimates: results directory (a rerun resumes)")
+    q.add_argument("--scheduler", metavar="ADDR", help="FMU estimates: 'processes' (default), 'serial' or a Dask "
+                   "address tcp://host:port")
+    q.add_argument("--workers", type=int, metavar="N", help="FMU estimates: local worker processes")
+    q.add_argument("--quiet", action="store_true", help="no progress on stderr")
     q.set_defaults(func=cmd_estimate)

@@ -197,6 +197,10 @@ def check_options(args: argparse.Namespace) -> None:
     for dest, role in (("port", "the driven node"), ("probe", "the probed node")):
         if given(dest) and isinstance(v[dest], str) and v[dest].strip().lower() in ("0", "gnd"):
             raise OptionError(f"--{dest} {v[dest]!r} is ground; {role} must be another node")
+    if given("scheduler") and isinstance(v["scheduler"], str) and v["scheduler"] not in ("processes", "serial") \
+            and "://" not in v["scheduler"]:
+        raise OptionError(f"--scheduler must be 'processes', 'serial' or an address tcp://host:port "
+                          f"(got {v['scheduler'][:80]!r})")
     if command == "study":
         _study_budget(v)
     if command == "estimate" and given("config"):

@@ -57,7 +57,7 @@ def test_pris_engine_equals_the_fmu(tmp_path):
 def test_injection_engine_equals_simulate_current_injection():
     circuit = get_model("three-section").circuit
     w = td.simulate_pris(circuit, "n1", THREE_SMALL, 11e6)
-    eng = ap.InjectionEngine(circuit, "n1", w["i_in"], 11e6)
+    eng = ap.InjectionEngine(circuit, "n1", w["i_in"], 11e6, hold="step")
     v = eng.simulate({"Rs": np.array([0.083, 0.2]), "Ls": np.array([181e-6, 150e-6])})
     for k, over in enumerate([{"Rs": 0.083, "Ls": 181e-6}, {"Rs": 0.2, "Ls": 150e-6}]):
         ref = td.simulate_current_injection(circuit, "n1", w["i_in"], 11e6, overrides=over)

@@ -129,7 +129,7 @@ _BASES = {
     "build-fmu": ["build-fmu", "--model", "two-section", "--out", "{tmp}/fmu", "--with-source"],
     "lab": ["lab", "--quick", "--out", "{tmp}/lab.csv"],
     "study": ["study", "two-section", "--quick", "--out", "{tmp}/study"],
-    "estimate": ["estimate", "--config", "{tmp}/missing.json"],
+    "estimate": ["estimate", "--config", str(Path(__file__).parent / "data" / "estimate" / "two_section_frequency.json")],
     "diagnose": ["diagnose", "--measured", str(_FUZZ / "good_response.csv"), "--model", "two-section"],
 }
 # (command, option, bad value, words the one line must hold); the option replaces its value in the base
@@ -212,6 +212,9 @@ _BAD_OPTIONS = [
     ("study", "--snr-db", "abc", "apply to the three-section study only"),
     ("study", "--optimisers", "xx", "apply to the three-section study only"),
     ("estimate", "--config", "{tmp}/missing.json", "--config: file not found"),
+    ("estimate", "--workers", "0", "--workers must be from 1"),
+    ("estimate", "--scheduler", "bogus", "--scheduler must be"),
+    ("estimate", "--out", "/dev/null/x", "--out: /dev/null is not a directory"),
     ("diagnose", "--measured", "{tmp}/missing.csv", "--measured: file not found"),
     ("diagnose", "--measured", str(_FUZZ / "bad_nan_magnitude.csv"), "bad_nan_magnitude.csv:"),
     ("diagnose", "--segment", "open", "cannot select segment 'open'"),

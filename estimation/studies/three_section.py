@@ -256,7 +256,7 @@ def build_approach(approach: str, metric: str, params: ParameterSet | None = Non
             eng: Any = ap.PrisEngine(circuit, PORT, SOURCE_TIME, FS_TIME, w["time_s"].size, probes=[])
             cls: Any = {"time": BridgeTime, "emd": BridgeEMD, "iemd": BridgeIEMD}[approach]
         else:
-            eng = ap.InjectionEngine(circuit, PORT, w["i_in"], FS_TIME)
+            eng = ap.InjectionEngine(circuit, PORT, w["i_in"], FS_TIME, hold="step")  # thesis 4.2.3: held samples
             cls = {"time": ap.TimeDomain, "emd": ap.EMDApproach, "iemd": ap.IEMDApproach}[approach]
         return cls(params, eng, w["v_in"], metric)
     raise common.StudyError(f"three-section approach must be one of {', '.join(APPROACHES)} (got {approach!r})")

@@ -1,0 +1,331 @@
+"""``pris-cosim estimate`` with an FMU in the loop: a recipe for an expensive black box.
+
+Config (JSON)::
+
+    {
+      "fmu": "fmus/two-section/two_section_dut.fmu",   # FMI 2.0 or 3.0 Co-Simulation, any tool
+      "input": "i_in",          # the FMU's current input (A); omit for an FMU with its own source
+      "output": "v_in",         # the FMU's voltage output compared with the record (V)
+      "outputs": ["v_mid"],     # optional further compared outputs (columns of the record)
+      "current": "i_in",        # FMU without input, approach "frequency": its current output
+      "parameters": {"R1": {"min": 1, "max": 100}, "L1": {"min": 1, "max": 100}},
+      "ties": {"R2": "R1"},     # optional: FMU parameters set equal to (expressions of) others
+      "target": {"kind": "waveforms-csv", "path": "record.csv",   # columns time_s, input, output(s)
+                 "values": {"R1": 10}},                          # optional true values (errors_percent)
+      "approach": "time",       # "time", "emd", "iemd" or "frequency" (Welch H1 of the waveforms)
+      "frequency": {"fmin": 20, "fmax": 9000, "points": 200},
+      "budget": {"design": 16, "restarts": 3, "simulations": 60},  # LHS points, restarts, runs per restart
+      "substeps": 2,            # communication steps per sample for an input FMU (linear input)
+      "diff_step": 1e-5,        # finite-difference step in the unit cube
+      "seed": 1
+    }
+
+Recipe (few evaluations, each a whole FMU run):
+
+1. a Latin-hypercube design of ``budget.design`` points (default ``20 n``,
+   :class:`scipy.stats.qmc.LatinHypercube`) in the unit cube (log scale for
+   positive bounds), scored on the first continuation window (a 256th of the
+   record: each point costs a 256th of a run), in parallel;
+2. from the ``budget.restarts`` best design points (scored on the time
+   residual of the first window), a trust-region least squares
+   (:func:`scipy.optimize.least_squares`, ``trf``, two-point finite-difference
+   Jacobian, bounds of the cube) per stage of a continuation: the time
+   residual over doubling windows of the record (the first ``first_window``
+   samples, default a 256th of the record, then twice that ...), then over the
+   whole record, then the approach's own residuals (:mod:`estimation.fmu_problem`);
+   at most ``budget.simulations`` runs per stage (default ``10 (n + 1)``), the
+   restarts in parallel;
+3. the verdict of :mod:`estimation.verdict` on the best end point
+   (uncertainty from the Fisher information, non-identifiable parameters,
+   agreement of the restarts).
+
+Every design chunk and restart is a task of :func:`estimation.executor.run_tasks`
+(local processes, ``serial``, or a Dask scheduler address), stored atomically
+as it finishes under ``--out DIR``; running the same command again skips the
+stored ones. Each worker process instantiates the FMU once and resets it per
+run; a run that fails, returns NaN or diverges costs :data:`~estimation.fmu_problem.PENALTY`
+and is counted (``failed_evaluations``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .fmu_model import FmuSetupError, fmu_variables
+from .fmu_problem import APPROACHES, problem
+
+__all__ = ["make_setup", "run_fmu_estimate", "design_task", "restart_task"]
+
+KNOWN = {"fmu", "input", "output", "outputs", "current", "parameters", "ties", "target", "approach", "frequency",
+         "budget", "substeps", "diff_step", "seed", "first_window", "design_score", "window_growth"}
+
+
+def _bad(text: str) -> FmuSetupError:
+    return FmuSetupError(text)
+
+
+def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]:
+    """Check an FMU config and turn it into the JSON-ready setup the workers build their problem from.
+
+    Raises
+    ------
+    FmuSetupError
+        One line naming the bad key, file or variable.
+    """
+    unknown = sorted(set(cfg) - KNOWN)
+    if unknown:
+        raise _bad(f"config key {unknown[0]!r} is not known with 'fmu' (known: {', '.join(sorted(KNOWN))})")
+    base = Path(base)
+    for key, kind in (("budget", dict), ("frequency", dict), ("substeps", int), ("first_window", int),
+                      ("seed", int), ("diff_step", (int, float))):
+        if key in cfg and (not isinstance(cfg[key], kind) or isinstance(cfg[key], bool)):
+            raise _bad(f"config key {key!r} has the wrong type ({type(cfg[key]).__name__})")
+    for key, value in dict(cfg.get("budget", {})).items():
+        if key not in ("design", "restarts", "simulations") or not isinstance(value, int) or value < 1:
+            raise _bad(f"config key 'budget': {key!r} must be one of design, restarts, simulations, a positive integer")
+    if "diff_step" in cfg and not 0 < float(cfg["diff_step"]) < 0.5:
+        raise _bad("config key 'diff_step' must lie in (0, 0.5)")
+    if "substeps" in cfg and cfg["substeps"] < 1:
+        raise _bad("config key 'substeps' must be at least 1")
+    growth = cfg.get("window_growth", 2.0)
+    if not isinstance(growth, (int, float)) or isinstance(growth, bool) or not 1.05 <= growth <= 16:
+        raise _bad("config key 'window_growth' must be a number from 1.05 to 16")
+    if cfg.get("design_score", "window") not in ("window", "frequency"):
+        raise _bad("config key 'design_score' must be 'window' or 'frequency'")
+    if "first_window" in cfg and cfg["first_window"] < 0:
+        raise _bad("config key 'first_window' must be 0 (automatic) or a number of samples")
+
+    def path_of(p: Any, key: str) -> str:
+        if not isinstance(p, str) or not p:
+            raise _bad(f"config key {key!r} must name a file")
+        q = Path(p) if Path(p).is_absolute() else (base / p)
+        return str(q.resolve())
+
+    fmu = path_of(cfg["fmu"], "fmu")
+    md, variables = fmu_variables(fmu)
+    inp = cfg.get("input")
+    if inp is not None and (not isinstance(inp, str) or variables.get(inp) is None
+                            or variables[inp].causality != "input"):
+        raise _bad(f"config key 'input': {inp!r} is not an input of {Path(fmu).name}")
+    output = cfg.get("output", "v_in")
+    if not isinstance(output, str) or output not in variables:
+        raise _bad(f"config key 'output': {output!r} is not a variable of {Path(fmu).name}")
+    extra = cfg.get("outputs", [])
+    if not isinstance(extra, list) or any(not isinstance(o, str) or o not in variables for o in extra):
+        raise _bad(f"config key 'outputs' must list variables of {Path(fmu).name}")
+    approach = cfg.get("approach", "time")
+    if approach not in APPROACHES:
+        raise _bad(f"config key 'approach' must be one of {', '.join(APPROACHES)} (got {approach!r})")
+    spec = cfg.get("parameters")
+    if not isinstance(spec, dict) or not spec:
+        raise _bad("config key 'parameters' must map FMU parameters to {\"min\": .., \"max\": ..}")
+    params: dict[str, list[Any]] = {}
+    ties = cfg.get("ties", {})
+    if not isinstance(ties, dict) or any(k not in variables or not isinstance(e, str) for k, e in ties.items()):
+        raise _bad(f"config key 'ties' must map parameters of {Path(fmu).name} to expressions")
+    tie_text = " ".join(ties.values())
+    for name, b in spec.items():
+        v = variables.get(name)
+        helper = v is None and name in tie_text  # e.g. a coupling k12 in "M12": "k12*sqrt(L1*L2)"
+        if not helper and (v is None or v.causality != "parameter"):
+            raise _bad(f"config key 'parameters': {name!r} is not a parameter of {Path(fmu).name}")
+        if not isinstance(b, dict) or not {"min", "max"} <= set(b):
+            raise _bad(f"parameter {name!r}: give {{\"min\": .., \"max\": ..}}")
+        try:
+            lo, hi = float(b["min"]), float(b["max"])
+        except (TypeError, ValueError):
+            raise _bad(f"parameter {name!r}: min and max must be numbers") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise _bad(f"parameter {name!r}: need finite min < max (got {lo:g}, {hi:g})")
+        scale = b.get("scale", "log" if lo > 0 else "linear")
+        if scale not in ("log", "linear") or (scale == "log" and lo <= 0):
+            raise _bad(f"parameter {name!r}: scale must be 'linear', or 'log' with min > 0")
+        params[name] = [lo, hi, scale]
+    tgt = cfg.get("target")
+    if not isinstance(tgt, dict) or tgt.get("kind", "waveforms-csv") != "waveforms-csv":
+        raise _bad("config key 'target' must be {\"kind\": \"waveforms-csv\", \"path\": FILE} with an FMU")
+    setup = {"fmu": fmu, "input": inp, "output": output, "extra_outputs": list(extra),
+             "current": cfg.get("current", "i_in" if inp is None and "i_in" in variables else None),
+             "parameters": params, "ties": dict(ties), "target": path_of(tgt.get("path"), "target.path"),
+             "approach": approach, "frequency": dict(cfg.get("frequency", {})),
+             "substeps": int(cfg.get("substeps", 2)), "diff_step": float(cfg.get("diff_step", 1e-5)),
+             "first_window": int(cfg.get("first_window", 0)), "design_score": cfg.get("design_score", "window"),
+             "window_growth": float(cfg.get("window_growth", 2.0))}
+    if not Path(setup["target"]).is_file():
+        raise _bad(f"target file not found: {tgt.get('path')}")
+    problem(setup)  # reads the record and instantiates the FMU here: every setup error now, in one line
+    return setup
+
+
+# ---------------------------------------------------------------------- tasks (run in worker processes)
+def design_task(setup: dict[str, Any], points: list[list[float]]) -> dict[str, Any]:
+    """Costs of design points (unit cube) with the worker's FMU instance."""
+    pb = problem(setup)
+    if setup.get("design_score") == "frequency" and pb.has_frequency:
+        costs = [pb.residual(np.asarray(x, float), "frequency")[1] for x in points]
+        return {"costs": costs, "scored_on": "frequency", **pb.stats()}
+    wins = pb.windows()
+    w = wins[0] if wins else None
+    costs = [pb.residual(np.asarray(x, float), "time", w)[1] for x in points]
+    return {"costs": costs, "scored_on": f"time, first {w or pb.n} samples", **pb.stats()}
+
+
+class _Spent(Exception):
+    pass
+
+
+def restart_task(setup: dict[str, Any], x0: list[float], simulations: int) -> dict[str, Any]:
+    """One least-squares restart from ``x0`` with at most ``simulations`` FMU runs."""
+    from scipy.optimize import least_squares
+
+    pb = problem(setup)
+    x = np.clip(np.asarray(x0, float), 0.0, 1.0)
+    stages: list[tuple[str, int | None]] = [("time", w) for w in pb.windows()] + [(pb.approach, None)]
+    if pb.approach != "time":
+        stages.insert(-1, ("time", None))
+    messages = []
+    best: dict[str, Any] = {}
+    start = 0
+    for k, (which, window) in enumerate(stages):
+        # every stage may use ``simulations`` runs (a window of w samples costs w / n of a whole run)
+        start = pb.simulations
+        limit = start + simulations
+        best = {"x": [float(v) for v in x], "cost": math.inf}
+
+        def fun(z: np.ndarray, which: str = which, limit: int = limit, window: int | None = window) -> np.ndarray:
+            if pb.simulations >= limit:
+                raise _Spent
+            r, c = pb.residual(z, which, window)
+            if c < best["cost"]:
+                best["x"], best["cost"] = [float(v) for v in z], float(c)
+            return r
+
+        try:
+            sol = least_squares(fun, x, jac="2-point", bounds=(0.0, 1.0), method="trf",
+                                diff_step=float(setup["diff_step"]), x_scale="jac", ftol=1e-12, xtol=1e-10,
+                                gtol=1e-12, max_nfev=10 * simulations)
+            messages.append(f"{which}{f' ({window} samples)' if window else ''}: {sol.message}")
+        except _Spent:
+            messages.append(f"{which}{f' ({window} samples)' if window else ''}: stopped at {limit} FMU runs in all")
+        if not math.isfinite(best["cost"]):
+            best["cost"] = float(pb.residual(np.asarray(best["x"]), which, window)[1])
+        x = np.asarray(best["x"], float)
+    return {"x": best["x"], "cost": best["cost"], "message": "; then ".join(messages), "stages": stages,
+            **pb.stats()}
+
+
+# ---------------------------------------------------------------------- the recipe
+def _out_dir(cfg: Mapping[str, Any], setup: Mapping[str, Any]) -> Path:
+    key = hashlib.sha256(json.dumps({"cfg": cfg, "setup": setup}, sort_keys=True, default=str).encode()).hexdigest()
+    return Path(f"estimate-{Path(setup['fmu']).stem}-{key[:8]}")
+
+
+def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None = None,
+                     scheduler: str | None = None, workers: int | None = None, progress: bool = True,
+                     base: str | Path = ".") -> dict[str, Any]:
+    """Estimate FMU parameters from a waveform record (see the module docstring).
+
+    Parameters
+    ----------
+    cfg : mapping
+        The config.
+    out : path, optional
+        Results directory (stored design chunks and restarts; a rerun resumes).
+        Default ``estimate-<fmu stem>-<config hash>``.
+    scheduler : str, optional
+        ``"processes"`` (default), ``"serial"`` or a Dask address ``tcp://host:port``.
+    workers : int, optional
+        Local worker processes (default: CPU count).
+    progress : bool
+        One line per finished task on stderr.
+    base : path
+        Directory relative paths of the config are taken from.
+
+    Returns
+    -------
+    dict
+        ``estimate``, ``cost``, ``fmu_simulations`` (runs of any window), ``fmu_record_equivalents``
+        (simulated samples over the record's), ``failed_evaluations``,
+        ``wall_s``, the verdict (``converged``, ``uncertainty``, ``non_identifiable`` ...),
+        ``restarts``, ``errors_percent`` when the target gives true ``values``.
+    """
+    from scipy.stats import qmc
+
+    from .executor import Task, run_tasks
+    from .verdict import verdict
+
+    t0 = time.perf_counter()
+    setup = make_setup(cfg, base)
+    pb = problem(setup)
+    names = list(pb.params.varying)
+    n = len(names)
+    budget = dict(cfg.get("budget", {}))
+    n_design = int(budget.get("design", 20 * n))  # scored on the first window: cheap
+    restarts = int(budget.get("restarts", 3))
+    per_restart = int(budget.get("simulations", 10 * (n + 1)))
+    if n_design < 1 or restarts < 1 or per_restart < n + 2:
+        raise _bad(f"config key 'budget': need design >= 1, restarts >= 1, simulations >= {n + 2}")
+    seed = int(cfg.get("seed", 1))
+    store = Path(out) if out is not None else _out_dir(cfg, setup)
+    executor = scheduler or "processes"
+    nw = workers or os.cpu_count() or 1
+    design = qmc.LatinHypercube(d=n, seed=seed).random(n_design)
+    chunks = [c for c in np.array_split(np.arange(n_design), min(nw, n_design)) if c.size]
+    tasks = [Task(f"design-{k:03d}", design_task, {"setup": setup, "points": design[c].tolist()},
+                  label=f"design {k + 1}/{len(chunks)} ({c.size} runs)") for k, c in enumerate(chunks)]
+    res = run_tasks(tasks, executor=executor, store=store, progress=progress, workers=workers)
+    costs = np.concatenate([np.asarray(r["costs"], float) for r in res])
+    order = np.argsort(costs, kind="stable")[:restarts]
+    sims = sum(int(r["simulations"]) for r in res)
+    fails = sum(int(r["failures"]) for r in res)
+    rtasks = [Task(f"restart-{k + 1}", restart_task,
+                   {"setup": setup, "x0": design[i].tolist(), "simulations": per_restart},
+                   label=f"restart {k + 1}/{len(order)} from design point {i} (cost {costs[i]:.3g})")
+              for k, i in enumerate(order)]
+    ends = run_tasks(rtasks, executor=executor, store=store, progress=progress, workers=workers)
+    sims += sum(int(r["simulations"]) for r in ends)
+    fails += sum(int(r["failures"]) for r in ends)
+    best = min(range(len(ends)), key=lambda k: ends[k]["cost"])
+    xb = np.asarray(ends[best]["x"], float)
+    pb.reset_stats()
+    rms = lambda x: float(np.sqrt(np.mean(pb.residual(np.asarray(x, float))[0] ** 2)))  # noqa: E731
+    end_points = [(np.asarray(e["x"], float), rms(e["x"])) for e in ends]
+    v = verdict(pb.residuals, pb.params, xb, pb.data(), end_points)
+    sims += pb.simulations
+    fails += pb.model.failures
+    samples = sum(int(r.get("samples", 0)) for r in list(res) + list(ends)) + pb.model.samples
+    est = pb.values(xb)
+    answer: dict[str, Any] = {
+        "fmu": Path(setup["fmu"]).name, "approach": setup["approach"],
+        "input": setup["input"], "input_hold": ("linear (input derivatives)" if pb.model.interpolates
+                                                else f"linear (midpoint of {setup['substeps']} substeps)")
+        if setup["input"] else None,
+        "estimate": {k: est[k] for k in names}, "tied": {k: est[k] for k in setup["ties"]},
+        "cost": float(ends[best]["cost"]), "fmu_simulations": sims, "failed_evaluations": fails,
+        "fmu_record_equivalents": samples / pb.n,
+        "wall_s": time.perf_counter() - t0, "converged": v["converged"],
+        "convergence_reason": v["convergence_reason"], "uncertainty": v["uncertainty"],
+        "non_identifiable": v["non_identifiable"],
+        "verdict": {k: v[k] for k in ("residual_rms", "noise_floor", "tolerance", "at_bound", "restarts", "condition")},
+        "design": {"points": n_design, "best_cost": float(costs.min()), "failed": int(np.sum(costs >= 1e3))},
+        "restarts": [{"restart": k + 1, "cost": e["cost"], "simulations": e["simulations"],
+                      "failures": e["failures"], "message": e["message"],
+                      "estimate": {kk: pb.values(np.asarray(e["x"]))[kk] for kk in names}}
+                     for k, e in enumerate(ends)],
+        "out": str(store),
+    }
+    truth = (cfg.get("target") or {}).get("values")
+    if isinstance(truth, dict):
+        answer["target"] = {k: float(truth[k]) for k in names if k in truth}
+        answer["errors_percent"] = {k: (est[k] - float(truth[k])) / float(truth[k]) * 100 for k in names
+                                    if k in truth and float(truth[k]) != 0}
+    return answer
