@@ -368,9 +368,6 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
     return best, [t[1] for t in screened]
 
 
-#: Starts screened for each full fit of a missing-section candidate (the staged start and spread values).
-SPLIT_STARTS = 64
-
 #: What a candidate's fit may raise when its parameters make the network degenerate (e.g. a node left with
 #: only inductors): the candidate is dropped, the diagnosis goes on.
 _CANDIDATE_FAILURES = (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError)
@@ -399,16 +396,12 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     staged.sort(key=lambda t: t[0])
     best = None
     for i, (_, cand, first) in enumerate(staged):
-        if i >= top and (best is not None and best.cost < 0.5 * must_beat or i >= top + 4):
-            break  # go on while no candidate has removed half of the cost
+        if i >= top and (best is not None and best.cost < must_beat or i >= top + 3):
+            break
         try:
             fit = ctx.fit(cand.circuit.with_values(first.values), effects)
-            # the staged start is the baseline's own minimum with the new section idle (a saddle when the
-            # true sections differ): values spread around it (log-normal, 35 %) are screened in one batch
-            rng = np.random.default_rng(1000 + i)
-            X = np.tile(np.concatenate([np.zeros(fit.nc), first.x[current_nc(first):]]), (SPLIT_STARTS, 1))
-            X[1:, :fit.nc] += rng.normal(0.0, 0.35, (SPLIT_STARTS - 1, fit.nc))
-            res = fit.fit(x0s=X, grid=False, keep_starts=6, max_nfev=80, tol=1e-8)
+            res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), first.x[current_nc(first):]])[None], grid=False,
+                          max_nfev=60, tol=1e-6)
         except _CANDIDATE_FAILURES:
             continue
         res.structure = cand.how
