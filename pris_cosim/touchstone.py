@@ -216,6 +216,18 @@ def _scan(path: PathLike, lines: Sequence[str], want_ports: int | None) -> _Layo
                                f"9 for 2-port)", data[0][0])
     if nports < 1:
         raise _error(path, f"bad port count {nports}")
+    for ln, toks in data:
+        for j, t in enumerate(toks):
+            if not (_NUM_RE.fullmatch(t) or _NONFINITE_RE.fullmatch(t)):
+                raise _error(path, f"not a number: {_show(t)}", ln, j + 1)
+    counts = {len(toks) for _, toks in data}
+    if len(counts) == 1 and not lay.version2:
+        (n0,) = counts
+        line_ports = {1 + 2 * p * p: p for p in range(1, 5)}.get(n0)
+        if line_ports is not None and line_ports != nports and n0 < 1 + 2 * nports * nports:
+            need = want_ports or nports
+            raise _error(path, f"every line holds {n0} values, as in a {line_ports}-port file; a {need}-port "
+                               f"file has {1 + 2 * need * need} values per frequency", data[0][0])
     lay.nports = nports
     if want_ports is not None and nports != want_ports:
         raise _error(path, f"a {nports}-port file where a {want_ports}-port file is needed")
