@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import find_peaks
+from threadpoolctl import threadpool_limits
 
 from estimation.diagnosis.fit import DiagnosisError, bic
 
@@ -51,6 +52,9 @@ BANDS_HZ = (2e3, 2e4, 1e5, np.inf)
 
 #: Relative noise above which the end-to-end response is not used to count resonances.
 CLEAN_NOISE = 0.03
+
+#: Weight of the uniformity prior on the section parameters (see ``_Packer.prior``).
+PRIOR_WEIGHT = 3.0
 
 #: Every ``DECIMATE``-th point is fitted (log-spaced sweeps of ~200 points per decade).
 DECIMATE = 3
@@ -108,23 +112,38 @@ class _Packer:
     def pack(self, m: WindingModel) -> np.ndarray:
         return np.concatenate([np.log(m.L), np.log(m.Cs), np.log(m.Cg),
                                [np.log(1.0 - m.rho), np.log(m.r_dc), m.beta, np.log(m.tan_c),
-                                m.g1 * 1e5, m.b1 * 1e5, m.g2 * 1e5, m.b2 * 1e5]])
+                                np.log(m.f_eddy), m.g1 * 1e5, m.b1 * 1e5, m.g2 * 1e5, m.b2 * 1e5]])
 
     def unpack(self, x: np.ndarray) -> WindingModel:
         n = self.n
         i = 3 * n + 1
         return WindingModel(L=np.exp(x[:n]), Cs=np.exp(x[n:2 * n]), Cg=np.exp(x[2 * n:i]),
-                            rho=float(1.0 - np.exp(x[i])), r_dc=float(np.exp(x[i + 1])), f_eddy=1e12,
-                            beta=float(x[i + 2]), tan_c=float(np.exp(x[i + 3])),
-                            g1=float(x[i + 4] * 1e-5), b1=float(x[i + 5] * 1e-5),
-                            g2=float(x[i + 6] * 1e-5), b2=float(x[i + 7] * 1e-5))
+                            rho=float(1.0 - np.exp(x[i])), r_dc=float(np.exp(x[i + 1])),
+                            f_eddy=float(np.exp(x[i + 4])), beta=float(x[i + 2]), tan_c=float(np.exp(x[i + 3])),
+                            g1=float(x[i + 5] * 1e-5), b1=float(x[i + 6] * 1e-5),
+                            g2=float(x[i + 7] * 1e-5), b2=float(x[i + 8] * 1e-5))
+
+    def prior(self, x: np.ndarray) -> np.ndarray:
+        """Weak uniformity prior: per-section ``ln L``, ``ln Cs``, ``ln Cg`` about their means.
+
+        Residuals ``PRIOR_WEIGHT * (ln p_i - mean ln p)``: a section ``e`` times
+        off the mean costs as much as ``PRIOR_WEIGHT**2`` noise-level residuals
+        among thousands, which keeps an ill-conditioned ladder from sending
+        single sections to their bounds without hiding what the data need.
+        """
+        n = self.n
+        out = []
+        for a, b in ((0, n), (n, 2 * n), (2 * n, 3 * n + 1)):
+            v = x[a:b]
+            out.append(PRIOR_WEIGHT * (v - v.mean()))
+        return np.concatenate(out)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         n = self.n
-        lo = np.concatenate([np.full(n, np.log(1e-4)), np.full(n, np.log(1e-14)), np.full(n + 1, np.log(1e-15)),
-                             [np.log(1e-5), np.log(1e-2), 0.0, np.log(1e-5), -100, -100, -100, -100]])
-        hi = np.concatenate([np.full(n, np.log(1e3)), np.full(n, np.log(1e-6)), np.full(n + 1, np.log(1e-6)),
-                             [np.log(0.8), np.log(1e5), 0.3, np.log(0.5), 100, 100, 100, 100]])
+        lo = np.concatenate([np.full(n, np.log(1e-3)), np.full(n, np.log(1e-13)), np.full(n + 1, np.log(1e-14)),
+                             [np.log(1e-5), np.log(1.0), 0.0, np.log(1e-5), np.log(10.0), -100, -100, -100, -100]])
+        hi = np.concatenate([np.full(n, np.log(1e2)), np.full(n, np.log(1e-7)), np.full(n + 1, np.log(1e-7)),
+                             [np.log(0.7), np.log(1e4), 0.3, np.log(0.5), np.log(1e7), 100, 100, 100, 100]])
         return lo, hi
 
 
@@ -146,7 +165,7 @@ def _start(sweep: Sweep, n: int) -> WindingModel:
     yl1 = sweep.y[0, 0] + sweep.y[0, 1]
     yl2 = sweep.y[0, 2] + sweep.y[0, 1]
     return WindingModel(L=np.full(n, l_tot / s), Cs=np.full(n, c_eff * n), Cg=np.full(n + 1, cg_tot / (n + 1)),
-                        rho=rho, r_dc=r_dc, f_eddy=1e12, beta=0.025, tan_c=0.01,
+                        rho=rho, r_dc=r_dc, f_eddy=5e3, beta=0.025, tan_c=0.01,
                         g1=float(np.real(yl1)), b1=float(np.imag(yl1)), g2=float(np.real(yl2)),
                         b2=float(np.imag(yl2)))
 
@@ -222,16 +241,22 @@ def _fit_n(sweep: Sweep, n: int, max_nfev: int = 60) -> tuple[WindingModel, floa
     sigma = weights(sweep)
     f = sweep.frequency_hz
 
-    def res(xv, keep):
-        return log_residuals(model_y(packer.unpack(xv), f[keep]), sweep.y[keep], sigma[keep])
+    def res(xf, keep, free):
+        xv = x.copy()
+        xv[free] = xf
+        r = log_residuals(model_y(packer.unpack(xv), f[keep]), sweep.y[keep], sigma[keep])
+        return np.concatenate([r, packer.prior(xv)])
 
+    free = np.arange(x.size)
     for fmax in BANDS_HZ:
         keep = sel[f[sel] <= fmax]
         if keep.size < 8:
             continue
         with np.errstate(all="ignore"):
-            sol = least_squares(res, x, bounds=(lo, hi), x_scale="jac", max_nfev=max_nfev, args=(keep,))
-        x = sol.x
+            sol = least_squares(res, x[free], bounds=(lo[free], hi[free]), x_scale="jac", max_nfev=max_nfev,
+                                args=(keep, free))
+        x = x.copy()
+        x[free] = sol.x
     model = packer.unpack(x)
     full = log_residuals(model_y(model, f), sweep.y, sigma)
     return model, float(np.sum(full**2))
@@ -267,8 +292,9 @@ def fit_fingerprint(sweep: Sweep, n_sections: int | None = None, progress: bool 
     n_r = 2 * sweep.y.size
     for n in candidates:
         t = time.perf_counter()
-        model, cost = _fit_n(sweep, n)
-        k = 3 * n + 1 + 8
+        with threadpool_limits(limits=1):  # small matrices: threaded BLAS only contends for the cores
+            model, cost = _fit_n(sweep, n)
+        k = 3 * n + 1 + 9
         b = bic(cost, n_r, k) if np.isfinite(cost) else np.inf
         tried.append({"n": n, "cost": cost, "bic": b, "rms": float(np.sqrt(cost / n_r))})
         _log(f"  N = {n}: rms {np.sqrt(cost / n_r):.3f} (1 = noise + {MODEL_FLOOR:g} floor), BIC {b:.0f}, "
