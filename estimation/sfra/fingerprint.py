@@ -12,8 +12,9 @@ band limit.
 The section count ``N`` comes from the data: the resonances of the
 end-to-end response are counted (peaks of ``|Y21|`` and of ``|1/Y21|``
 where the data stand above their noise); a section adds about one series
-and one anti-resonance, so ``N0 = ceil(count / 2) + 1``; ``N0 - 1``, ``N0``
-and ``N0 + 1`` are fitted and the lowest BIC wins.
+and one anti-resonance, so ``N0 = ceil(count / 2) + 1``; ``N0 - 1`` to
+``N0 + 2`` are fitted (each from :data:`STARTS` starting points, as the
+ladder fit has local minima) and the lowest BIC wins.
 
 Fits run by continuation in frequency (fit below 2 kHz, then up to 20 kHz,
 100 kHz and the whole sweep), which keeps the resonances from trapping the
@@ -55,6 +56,9 @@ CLEAN_NOISE = 0.03
 
 #: Weight of the uniformity prior on the section parameters (see ``_Packer.prior``).
 PRIOR_WEIGHT = 3.0
+
+#: Starting points of each fit: factors on the series and ground capacitances of the uniform start.
+STARTS = ((1.0, 1.0), (0.5, 2.0), (2.0, 0.5))
 
 #: Every ``DECIMATE``-th point is fitted (log-spaced sweeps of ~200 points per decade).
 DECIMATE = 3
@@ -234,9 +238,21 @@ def _log(msg: str, progress: bool) -> None:
 
 
 def _fit_n(sweep: Sweep, n: int, max_nfev: int = 60) -> tuple[WindingModel, float]:
+    """Best of the :data:`STARTS` fits of an ``n``-section winding: (model, weighted cost)."""
+    best = None
+    for cs, cg in STARTS:
+        m0 = _start(sweep, n)
+        model, cost = _fit_from(sweep, m0.copy(Cs=m0.Cs * cs, Cg=m0.Cg * cg), max_nfev)
+        if best is None or cost < best[1]:
+            best = (model, cost)
+    return best
+
+
+def _fit_from(sweep: Sweep, start: WindingModel, max_nfev: int) -> tuple[WindingModel, float]:
+    n = start.n
     packer = _Packer(n)
     lo, hi = packer.bounds()
-    x = np.clip(packer.pack(_start(sweep, n)), lo + 1e-9, hi - 1e-9)
+    x = np.clip(packer.pack(start), lo + 1e-9, hi - 1e-9)
     sel = np.arange(0, sweep.frequency_hz.size, DECIMATE)
     sigma = weights(sweep)
     f = sweep.frequency_hz
@@ -285,7 +301,7 @@ def fit_fingerprint(sweep: Sweep, n_sections: int | None = None, progress: bool 
         candidates = [int(n_sections)]
     else:
         n0 = int(np.clip(np.ceil(nres / 2) + 1, 3, 10))  # a series and an anti-resonance per section
-        candidates = [n0 - 1, n0, n0 + 1]
+        candidates = [n for n in range(n0 - 1, n0 + 3) if n >= 2]
     _log(f"reference {Path(sweep.source).name or '(memory)'}: {nres} resonances above the noise; "
          f"fitting N = {', '.join(map(str, candidates))}", progress)
     tried, best = [], None
