@@ -9,12 +9,16 @@ The winding is a cascade of ``N`` sections between node 0 (port 1) and node
 * a winding resistance, the share ``L_i / sum(L)`` of the total ``R_dc`` (Ohm);
 * a series (turn-to-turn) capacitance ``Cs_i`` (F) across the section;
 
-every node ``j`` has a ground capacitance ``Cg_j`` (F) to the core, and each
-port node a constant complex shunt admittance ``g + j b`` (S): the residual
-of the fixture and calibration seen in the measured ``Y11 + Y21`` and
-``Y22 + Y21`` below 10 kHz (on the shared reference about 3.5e-5 S at -115
-degrees on port 2, which no passive element gives; it is an artefact of the
-set-up, fitted so that it does not distort the winding parameters).
+every node ``j`` has a ground capacitance ``Cg_j`` (F) to the core and a
+constant complex leakage admittance to ground, linear along the winding
+between ``g1 + j b1`` (port-1 end) and ``g2 + j b2`` (port-2 end), S
+(:func:`leakage_profile`).  The leakage is what the measured ``Y11 + Y21`` and
+``Y22 + Y21`` show below 10 kHz (on the shared reference about 5e-6 S at
+port 1 and 3.5e-5 S at -115 degrees at port 2; the negative conductance
+says it includes a set-up/calibration residual).  Being spread along the
+winding, its split between the two ports follows the series impedance: a
+short moves it towards the nearer port, as the measured sweeps show (the
+port-1 share grows as the short approaches port 1).
 
 Iron-core loss.  The laminated core makes the inductance and its loss
 frequency dependent (eddy currents).  All core inductances are multiplied by
@@ -167,6 +171,19 @@ class WindingModel:
         return cls(**kw)
 
 
+def leakage_profile(model: WindingModel) -> np.ndarray:
+    """Constant complex leakage admittance of each node to ground, S, shape ``(N + 1,)``.
+
+    Linear along the winding from ``g1 + j b1`` at port 1 to ``g2 + j b2`` at
+    port 2 (node ``j`` at ``x = j / N``), scaled so that each end value alone
+    gives about that admittance at its port when the winding is a short.
+    """
+    n = model.n
+    x = np.arange(n + 1) / n
+    w = 1.0 / float(np.sum((1.0 - x) ** 2))
+    return w * ((1.0 - x) * (model.g1 + 1j * model.b1) + x * (model.g2 + 1j * model.b2))
+
+
 def admittance(model: WindingModel, f: np.ndarray) -> np.ndarray:
     """Two-port admittance matrix of the winding, S, shape ``(F, 2, 2)``.
 
@@ -205,8 +222,7 @@ def admittance(model: WindingModel, f: np.ndarray) -> np.ndarray:
     Y[:, 1:, :n] -= yb
     nodes = np.arange(n + 1)
     Y[:, nodes, nodes] += cap[:, None] * np.asarray(model.Cg, dtype=float)[None, :]
-    Y[:, 0, 0] += model.g1 + 1j * model.b1
-    Y[:, n, n] += model.g2 + 1j * model.b2
+    Y[:, nodes, nodes] += leakage_profile(model)[None, :]
     p = [0, n]
     if n == 1:
         return Y[:, p][:, :, p]
