@@ -355,7 +355,7 @@ def read_touchstone(path: PathLike, nports: int | None = None) -> TouchstoneData
             ts = skrf.io.touchstone.Touchstone(fid)
             f = np.asarray(ts.f, dtype=float)
             flat = np.asarray(ts.s_flat, dtype=complex)
-            network = skrf.Network(frequency=skrf.Frequency.from_f(f, unit="hz"), s=ts.s, z0=ts.z0)
+            z0 = np.asarray(ts.z0)
     except Exception as exc:  # skrf's own parse errors, as one line
         text = " ".join(str(exc).split()) or type(exc).__name__
         raise _error(path, f"scikit-rf cannot read the file: {text}") from None
@@ -373,7 +373,14 @@ def read_touchstone(path: PathLike, nports: int | None = None) -> TouchstoneData
     if not np.all(np.isfinite(m)):
         r = int(np.argmax(~np.all(np.isfinite(m.reshape(f.size, -1)), axis=1)))
         raise _error(path, "non-finite parameter values", lay.record_lines[r])
-    network.name = Path(path).stem
+    # the Network is built from these values: skrf's own v1 Y import scales by R instead of 1/R
+    with _quiet():
+        s_par = _convert(m, param, "S", r_ref) if param != "S" else m
+        network = skrf.Network(frequency=skrf.Frequency.from_f(f, unit="hz"), s=s_par,
+                               z0=np.full((f.size, m.shape[1]), r_ref) if not lay.version2 else z0,
+                               name=Path(path).stem)
+    if not np.all(np.isfinite(network.s)):
+        raise _error(path, "conversion to S-parameters gives non-finite values")
     return TouchstoneData(f, param, m, r_ref, list(lay.comments), network)
 
 
