@@ -46,7 +46,7 @@ __all__ = ["Fingerprint", "fit_fingerprint", "load_or_fit", "count_resonances", 
            "CODE_VERSION"]
 
 #: Part of the cache key: bump when the model or the fit changes.
-CODE_VERSION = "sfra-fingerprint-1"
+CODE_VERSION = "sfra-fingerprint-2"
 
 #: Continuation bands of the reference fit, Hz.
 BANDS_HZ = (2e3, 2e4, 1e5, np.inf)
