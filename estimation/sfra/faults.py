@@ -29,6 +29,20 @@ in a failed fit); a fit that ends above the baseline cost (the reference
 model against the new sweep) has failed and is never a candidate.  The cause with the lowest BIC is named when it beats the
 baseline by :data:`MIN_DELTA_BIC` and removes at least :data:`MIN_GAIN` of
 its cost (the gain); otherwise the answer is ``none``.
+
+Location and severity.  The location is the best section ``k``, reported
+as ``(k - 0.5) / N`` from the port-1 end.  On the shared measurements the
+fitted section follows the short's distance from the middle of the winding
+(the low-frequency loss of inductance is largest for a central short), but
+mirror-image positions land in the same section: the side is carried by the
+ground admittances below 10 kHz, which the reference model's constant port
+shunts do not follow, so the location is only as good as that distance.
+Only the loop resistance referred to the section's turns is identifiable
+(a loop of ``a`` times the section's turns with resistance ``R`` acts as
+``R / a**2``), and the shorted fraction is reported as ``c**2``, the share
+of the section's flux linkage the loop cancels.  Bolted and resistive
+shorts differ by two orders of magnitude in the referred resistance;
+:data:`BOLTED_BELOW_OHM` separates them.
 """
 
 from __future__ import annotations

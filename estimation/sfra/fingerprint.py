@@ -14,7 +14,8 @@ end-to-end response are counted (peaks of ``|Y21|`` and of ``|1/Y21|``
 where the data stand above their noise); a section adds about one series
 and one anti-resonance, so ``N0 = ceil(count / 2) + 1``; ``N0 - 1`` to
 ``N0 + 2`` are fitted (each from :data:`STARTS` starting points, as the
-ladder fit has local minima) and the lowest BIC wins.
+ladder fit has local minima), then ``N + 1`` as long as the largest count
+tried has the lowest BIC (up to :data:`MAX_SECTIONS`); the lowest BIC wins.
 
 Fits run by continuation in frequency (fit below 2 kHz, then up to 20 kHz,
 100 kHz and the whole sweep), which keeps the resonances from trapping the
@@ -46,7 +47,10 @@ __all__ = ["Fingerprint", "fit_fingerprint", "load_or_fit", "count_resonances", 
            "CODE_VERSION"]
 
 #: Part of the cache key: bump when the model or the fit changes.
-CODE_VERSION = "sfra-fingerprint-2"
+CODE_VERSION = "sfra-fingerprint-3"
+
+#: Largest section count the automatic search goes to.
+MAX_SECTIONS = 10
 
 #: Continuation bands of the reference fit, Hz.
 BANDS_HZ = (2e3, 2e4, 1e5, np.inf)
@@ -306,7 +310,9 @@ def fit_fingerprint(sweep: Sweep, n_sections: int | None = None, progress: bool 
          f"fitting N = {', '.join(map(str, candidates))}", progress)
     tried, best = [], None
     n_r = 2 * sweep.y.size
-    for n in candidates:
+    queue = list(candidates)
+    while queue:
+        n = queue.pop(0)
         t = time.perf_counter()
         with threadpool_limits(limits=1):  # small matrices: threaded BLAS only contends for the cores
             model, cost = _fit_n(sweep, n)
@@ -317,6 +323,8 @@ def fit_fingerprint(sweep: Sweep, n_sections: int | None = None, progress: bool 
              f"{time.perf_counter() - t:.0f} s", progress)
         if np.isfinite(b) and (best is None or b < best[2]):
             best = (model, cost, b, n)
+            if n_sections is None and not queue and n < MAX_SECTIONS:
+                queue.append(n + 1)  # the largest count tried is still the best: try one more
     if best is None:
         raise DiagnosisError(f"{sweep.source}: the reference fit failed for every section count")
     model, cost, b, n = best
