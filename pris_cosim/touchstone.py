@@ -363,13 +363,19 @@ def read_touchstone(path: PathLike, nports: int | None = None) -> TouchstoneData
     if f.size != lay.raw.shape[0] or flat.shape != (f.size, p * p):
         raise _error(path, f"scikit-rf read {f.size} points of {flat.shape[-1]} values, the file has "
                            f"{lay.raw.shape[0]} of {p * p}")
-    m = flat.reshape(-1, p, p)
-    if p == 2 and not lay.version2:
-        m = m.transpose(0, 2, 1)  # v1 two-port order 11 21 12 22
     param = str(ts.parameter).upper()
-    r_ref = float(np.real(ts.resistance)) if ts.resistance is not None else lay.r_ref
-    if not lay.version2 and param in ("Z", "Y"):
-        m = m * r_ref if param == "Z" else m / r_ref
+    res = np.ravel(np.real(np.asarray(ts.resistance, dtype=complex))) if ts.resistance is not None else []
+    r_ref = float(res[0]) if len(res) else lay.r_ref
+    if lay.version2:
+        # keyword files (matrix format, data order, per-port references): take skrf's S and convert back
+        s_net = np.asarray(ts.s, dtype=complex)
+        m = s_net if param == "S" else _convert(s_net, "S", param, r_ref)
+    else:
+        m = flat.reshape(-1, p, p)
+        if p == 2:
+            m = m.transpose(0, 2, 1)  # v1 two-port order 11 21 12 22
+        if param in ("Z", "Y"):
+            m = m * r_ref if param == "Z" else m / r_ref
     if not np.all(np.isfinite(m)):
         r = int(np.argmax(~np.all(np.isfinite(m.reshape(f.size, -1)), axis=1)))
         raise _error(path, "non-finite parameter values", lay.record_lines[r])

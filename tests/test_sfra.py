@@ -283,3 +283,21 @@ def test_indices_match_the_published_formulas():
     assert v["ASLE_dB"] == pytest.approx((1 + 1 + 3 + 0) / 4)
     assert v["SD_dB"] == pytest.approx(np.sqrt((1 + 1 + 9 + 0) / 3))
     assert band_indices(x[:1], y[:1])["CC"] is None
+
+
+def test_touchstone_version_2_and_more_ports(tmp_path):
+    import skrf
+
+    f = np.logspace(2, 7, 21)
+    _, _, s = _rc_two_port(f)
+    s3 = np.zeros((f.size, 3, 3), complex)
+    s3[:, :2, :2] = s
+    s3[:, 2, 2] = 1.0  # an open third port
+    for p, m, kw in ((tmp_path / "rc.ts", s, {"version": "2.0"}), (tmp_path / "rc3.s3p", s3, {})):
+        net = skrf.Network(frequency=skrf.Frequency.from_f(f, unit="hz"), s=m, z0=50.0, name="rc")
+        p.write_text(net.write_touchstone(return_string=True, **kw))
+        ts = read_touchstone(p)
+        assert ts.nports == m.shape[1]
+        np.testing.assert_allclose(ts.values, m, rtol=1e-12, atol=1e-15)
+    with pytest.raises(MeasuredDataError, match=r"rc3\.s3p: a 3-port file where a 2-port file is needed"):
+        load_sweep(tmp_path / "rc3.s3p")
