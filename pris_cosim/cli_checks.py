@@ -150,9 +150,11 @@ def check_options(args: argparse.Namespace) -> None:
     def given(dest: str) -> bool:
         return v.get(dest) is not None
 
-    for dest in ("netlist", "measured"):
+    for dest in ("netlist", "measured", "reference"):
         if given(dest):
             _input_file(_flag(dest), v[dest])
+    if given("model_out"):
+        _output_file("--model-out", v["model_out"])
     if command in _CONFIG_FILE_COMMANDS and given("config"):
         _input_file("--config", v["config"])
     if given("out"):
@@ -166,7 +168,7 @@ def check_options(args: argparse.Namespace) -> None:
             _output_dir("--out", v["out"])
     if given("plot"):
         _output_file("--plot", v["plot"])
-    for dest in ("plots", "report", "fmu_dir"):
+    for dest in ("plots", "report", "fmu_dir", "cache"):
         if given(dest):
             _output_dir(_flag(dest), v[dest])
     if given("model") and isinstance(v["model"], str):

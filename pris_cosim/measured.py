@@ -27,12 +27,10 @@ Keysight/Agilent E4990A export (:func:`read_e4990a`)
     ``!`` header lines, ``BEGIN CH1_DATA``, a column header such as
     ``Frequency(Hz), R(Ohm)-data, X(Ohm)-data`` or
     ``Frequency(Hz), |Z|(Ohm)-data, theta-z(deg)-data``, data rows, ``END``.
-Touchstone version 1 (:func:`read_touchstone_z`, :func:`write_touchstone_z`)
-    1-port and 2-port files with an option line ``# <unit> <param> <format>
-    R <ohm>``.  Values are normalised to the reference resistance ``R``
-    (version 1 convention), so Z-parameters are multiplied by ``R`` on
-    reading and divided by ``R`` on writing.  S- and Y-parameter files are
-    converted to Z.
+Touchstone (:func:`read_touchstone_z`, :func:`write_touchstone_z`)
+    1-port and 2-port files, read and written by scikit-rf through
+    :mod:`pris_cosim.touchstone` (which also reads any port count, S/Y/Z,
+    DB/MA/RI, version 1 and 2).  S- and Y-parameter files are converted to Z.
 MATLAB ``.mat`` (:func:`read_mat`, :func:`write_mat`)
     Variable ``frequency_hz`` (or ``f``) plus one complex array per response,
     or ``NAME_mag``/``NAME_phase_deg`` or ``NAME_re``/``NAME_im`` pairs.
@@ -1539,33 +1537,23 @@ def write_e4990a(
 
 
 # ---------------------------------------------------------------------------
-# Touchstone v1
+# Touchstone (read and written by scikit-rf in pris_cosim.touchstone)
 # ---------------------------------------------------------------------------
 
-_TS_EXT_RE = re.compile(r"\.[a-z](\d+)p", re.IGNORECASE)
 _TWO_PORT_NAMES = ("Z11", "Z12", "Z21", "Z22")
-
-
-def _touchstone_ports_from_ext(path: PathLike) -> int | None:
-    m = _TS_EXT_RE.fullmatch(Path(path).suffix)
-    return int(m.group(1)) if m else None
+_TS_EXT = re.compile(r"\.[a-z](\d+)p", re.IGNORECASE)  # as pris_cosim.touchstone.EXTENSION_RE
 
 
 def read_touchstone_z(path: PathLike, name: str = "Zin") -> MeasuredResponses:
-    """Read a Touchstone v1 1-port or 2-port file as Z-parameters in Ohm.
+    """Read a 1-port or 2-port Touchstone file as Z-parameters in Ohm.
+
+    The file is read by scikit-rf through :func:`pris_cosim.touchstone.read_touchstone`
+    (S, Y or Z; DB, MA or RI; version 1, and version 2 where skrf reads it).
 
     Parameters
     ----------
     path : str or os.PathLike
-        ``.s1p``/``.s2p`` (or ``.z1p``, ``.ts``, ...) file.  ``!`` starts a
-        comment; the first option line ``# <unit> <param> <format> R <ohm>``
-        sets frequency unit (Hz, kHz, MHz, GHz; default GHz), parameter
-        (Z, S or Y; default S), format (MA = magnitude/angle in degrees,
-        DB = 20 log10 magnitude/angle, RI = real/imaginary; default MA) and
-        reference resistance (default 50 Ohm); later option lines are
-        ignored.  The port count comes from the extension ``.?Np`` or, for
-        other extensions, from the number of values on the first data line
-        (3 -> 1 port, 9 -> 2 ports).
+        ``.s1p``/``.s2p`` (or ``.z1p``, ``.ts``, ...) file.
     name : str, optional
         Response name for 1-port data (default ``"Zin"``).
 
@@ -1574,166 +1562,35 @@ def read_touchstone_z(path: PathLike, name: str = "Zin") -> MeasuredResponses:
     MeasuredResponses
         1-port: one response ``name``; 2-port: ``Z11, Z12, Z21, Z22`` (Ohm).
 
-    Notes
-    -----
-    Touchstone v1 stores network parameters normalised to the reference
-    resistance ``R``: Z-parameters are multiplied by ``R`` on reading,
-    Y-parameters divided by ``R`` (then inverted to Z), and S-parameters
-    converted with ``Z = R (I + S)(I - S)^-1``.  2-port rows are ordered
-    ``f N11 N21 N12 N22`` (the v1 two-port convention).  Touchstone 2.0
-    keyword files (``[Version]`` ...) are rejected.
+    Raises
+    ------
+    MeasuredDataError
+        One line naming file and line; also for files with more than 2 ports.
     """
-    lines = _read_text_lines(path)
-    comments: list[str] = []
-    unit, param, fmt, rref = "ghz", "s", "ma", 50.0
-    option_seen = False
-    data_lines: list[tuple[int, list[str]]] = []
-    for idx, line in enumerate(lines):
-        ln = idx + 1
-        body, bang, comment = line.partition("!")
-        if bang:
-            comments.append(comment[1:] if comment.startswith(" ") else comment)
-        s = body.strip()
-        if not s:
-            continue
-        if s.startswith("["):
-            raise MeasuredDataError(
-                path, f"Touchstone 2.0 keyword {_show(s.split()[0])} not supported (version 1 only)", ln
-            )
-        if s.startswith("#"):
-            if option_seen:
-                continue
-            if data_lines:
-                raise MeasuredDataError(path, "option line after data lines", ln)
-            option_seen = True
-            toks = s[1:].split()
-            i = 0
-            while i < len(toks):
-                t = toks[i].lower()
-                if t in _UNIT_SCALE:
-                    unit = t
-                elif t in ("s", "y", "z"):
-                    param = t
-                elif t in ("h", "g"):
-                    raise MeasuredDataError(path, f"{t.upper()}-parameters are not supported", ln)
-                elif t in ("ma", "db", "ri"):
-                    fmt = t
-                elif t == "r":
-                    if i + 1 >= len(toks):
-                        raise MeasuredDataError(path, "option 'R' without a value", ln)
-                    try:
-                        rref = float(toks[i + 1])
-                    except ValueError:
-                        raise MeasuredDataError(
-                            path, f"reference resistance {_show(toks[i + 1])} is not a number", ln
-                        ) from None
-                    if not (math.isfinite(rref) and rref > 0):
-                        raise MeasuredDataError(path, f"reference resistance must be > 0, got {rref!r}", ln)
-                    i += 1
-                else:
-                    raise MeasuredDataError(path, f"unknown option {_show(toks[i])}", ln)
-                i += 1
-            continue
-        data_lines.append((ln, s.split()))
-    if not data_lines:
-        if not any(ln.strip() for ln in lines):
-            raise MeasuredDataError(path, "empty file", 1)
-        raise MeasuredDataError(path, "no data lines", len(lines))
-    nports = _touchstone_ports_from_ext(path)
-    if nports is None:
-        n0 = len(data_lines[0][1])
-        nports = {3: 1, 9: 2}.get(n0)
-        if nports is None:
-            raise MeasuredDataError(
-                path,
-                f"cannot infer the port count from {n0} values (expected 3 for 1-port, 9 for 2-port)",
-                data_lines[0][0],
-            )
-    if nports not in (1, 2):
-        raise MeasuredDataError(path, f"{nports}-port files are not supported (1 or 2 ports)")
-    per = 1 + 2 * nports * nports
-    records: list[tuple[int, list[tuple[int, int, str]]]] = []
-    cur: list[tuple[int, int, str]] = []
-    for ln, toks in data_lines:
-        if not cur:
-            records.append((ln, cur))
-        if len(cur) + len(toks) > per:
-            raise MeasuredDataError(
-                path,
-                f"too many values: a {nports}-port record has {per} (frequency + {per - 1})",
-                ln,
-            )
-        base = len(cur)
-        cur.extend([(ln, base + j + 1, t) for j, t in enumerate(toks)])
-        if len(cur) == per:
-            cur = []
-    if cur:
-        raise MeasuredDataError(
-            path, f"incomplete record: {len(cur)} of {per} values", records[-1][0]
-        )
-    vals = np.empty((len(records), per))
-    for r, (_, toks) in enumerate(records):
-        for k, (ln, pos, t) in enumerate(toks):
-            vals[r, k] = _parse_number(path, t, ln, pos, None)
-    line_no = [r[0] for r in records]
-    _check_count(path, vals.shape[0], line_no[-1] if line_no else 1, "frequency points")
-    with np.errstate(over="ignore"):  # an overflow gives inf, refused below with the line
-        f = vals[:, 0] * _UNIT_SCALE[unit]
-    if not np.all(np.isfinite(f)):
-        r = int(np.argmax(~np.isfinite(f)))
-        raise MeasuredDataError(path, f"frequency {_r(vals[r, 0])} {unit} overflows in Hz", line_no[r], 1, "frequency")
-    _check_rows_frequency(path, f, line_no, 1, "frequency")
-    a, b = vals[:, 1::2], vals[:, 2::2]
-    if fmt == "ri":
-        v = a + 1j * b
-    else:
-        if fmt == "ma":
-            bad = np.argwhere(a < 0)
-            if bad.size:
-                r, c = bad[0]
-                ln, pos, _ = records[r][1][1 + 2 * c]
-                raise MeasuredDataError(path, f"negative magnitude {_r(a[r, c])}", ln, pos)
-            mag = a
-        else:
-            bad = np.argwhere(np.abs(a) > 6000.0)  # 10**(6000/20) = 1e300: beyond double precision
-            if bad.size:
-                r, c = bad[0]
-                ln, pos, _ = records[r][1][1 + 2 * c]
-                raise MeasuredDataError(path, f"magnitude {_r(a[r, c])} dB is outside -6000 .. 6000 dB", ln, pos)
-            mag = 10.0 ** (a / 20.0)
-        v = _polar(mag, b)
-    nf = f.size
-    if nports == 1:
-        m = v.reshape(nf, 1, 1)
-    else:
-        # v1 two-port order: N11 N21 N12 N22
-        m = np.empty((nf, 2, 2), dtype=complex)
-        m[:, 0, 0], m[:, 1, 0], m[:, 0, 1], m[:, 1, 1] = v[:, 0], v[:, 1], v[:, 2], v[:, 3]
-    eye = np.eye(nports)
+    from .touchstone import read_touchstone
+
+    ts = read_touchstone(path)
+    if ts.nports not in (1, 2):
+        raise MeasuredDataError(path, f"{ts.nports}-port files are not supported here (1 or 2 ports)")
     with np.errstate(all="ignore"):
-        if param == "z":
-            zm = m * rref
-        elif param == "y":
-            zm = _safe_inv(path, m / rref, line_no, "Y matrix")
-        else:
-            zm = rref * (eye + m) @ _safe_inv(path, eye - m, line_no, "I - S")
-    if not np.all(np.isfinite(zm)):
-        r = int(np.argmax(~np.all(np.isfinite(zm.reshape(nf, -1)), axis=1)))
-        raise MeasuredDataError(path, "conversion to Z gives non-finite values", line_no[r])
-    if nports == 1:
+        try:
+            zm = ts.z()
+        except np.linalg.LinAlgError:
+            zm = np.full(ts.values.shape, np.nan, dtype=complex)
+    bad = np.flatnonzero(~np.all(np.isfinite(zm.reshape(zm.shape[0], -1)), axis=1))
+    if ts.parameter != "Z" and bad.size == 0:
+        inv = ts.values if ts.parameter == "Y" else np.eye(ts.nports) - ts.values
+        scale = np.max(np.abs(inv).reshape(inv.shape[0], -1), axis=1) ** ts.nports
+        det = np.linalg.det(inv) if ts.nports > 1 else inv[:, 0, 0]
+        bad = np.flatnonzero(~(np.abs(det) > 1e-300 + 1e-14 * scale))
+    if bad.size:
+        what = "Y matrix" if ts.parameter == "Y" else "I - S"
+        raise MeasuredDataError(path, f"{what} is singular; cannot convert to Z (point {int(bad[0]) + 1})")
+    if ts.nports == 1:
         responses = {name: zm[:, 0, 0]}
     else:
         responses = {"Z11": zm[:, 0, 0], "Z12": zm[:, 0, 1], "Z21": zm[:, 1, 0], "Z22": zm[:, 1, 1]}
-    return MeasuredResponses(f, responses, source=os.fspath(path), comments=comments)
-
-
-def _safe_inv(path: PathLike, m: np.ndarray, line_no: Sequence[int], what: str) -> np.ndarray:
-    det = np.linalg.det(m) if m.shape[1] > 1 else m[:, 0, 0]
-    scale = np.max(np.abs(m).reshape(m.shape[0], -1), axis=1) ** m.shape[1]
-    bad = np.flatnonzero(~(np.abs(det) > 1e-300 + 1e-14 * scale))
-    if bad.size:
-        raise MeasuredDataError(path, f"{what} is singular; cannot convert to Z", line_no[int(bad[0])])
-    return np.linalg.inv(m)
+    return MeasuredResponses(ts.frequency_hz, responses, source=os.fspath(path), comments=ts.comments)
 
 
 def write_touchstone_z(
@@ -1744,7 +1601,7 @@ def write_touchstone_z(
     r_ref: float = 50.0,
     name: str | None = None,
 ) -> None:
-    """Write Z-parameters as a Touchstone v1 file, atomically.
+    """Write Z-parameters as a Touchstone v1 file, atomically, through scikit-rf.
 
     Parameters
     ----------
@@ -1763,17 +1620,11 @@ def write_touchstone_z(
     name : str, optional
         1-port response to write.
     """
-    fmt = form.lower()
-    if fmt not in ("ri", "ma", "db"):
-        raise ValueError(f"form must be RI, MA or DB, got {form!r}")
-    if unit.lower() not in _UNIT_SCALE:
-        raise ValueError(f"unit must be Hz, kHz, MHz or GHz, got {unit!r}")
-    r_ref = float(r_ref)
-    if not (math.isfinite(r_ref) and r_ref > 0):
-        raise ValueError(f"r_ref must be > 0 Ohm, got {r_ref!r}")
+    from .touchstone import write_touchstone
+
     if name is None and set(_TWO_PORT_NAMES) <= set(data.names):
-        nports = 2
-        cols = [data.responses[k] for k in ("Z11", "Z21", "Z12", "Z22")]  # v1 order
+        r = data.responses
+        zm = np.stack([np.stack([r["Z11"], r["Z12"]], -1), np.stack([r["Z21"], r["Z22"]], -1)], 1)
     else:
         if name is None:
             if len(data.names) != 1:
@@ -1781,36 +1632,8 @@ def write_touchstone_z(
                     f"data has responses {data.names}; need Z11..Z22 or a single response (name=...)"
                 )
             name = data.names[0]
-        nports = 1
-        cols = [data.response(name)]
-    ext_ports = _touchstone_ports_from_ext(path)
-    if ext_ports is not None and ext_ports != nports:
-        raise ValueError(f"extension {Path(path).suffix!r} does not match {nports}-port data")
-    scale = _UNIT_SCALE[unit.lower()]
-    fcol = (data.frequency_hz / scale).tolist() if scale != 1.0 else data.frequency_hz.tolist()
-    parts: list[list[float]] = []
-    for z in cols:
-        v = z / r_ref
-        if fmt == "ri":
-            parts += [v.real.tolist(), v.imag.tolist()]
-        else:
-            mag = np.abs(v)
-            if fmt == "db":
-                with np.errstate(divide="ignore"):
-                    mag = 20.0 * np.log10(mag)
-                if not np.all(np.isfinite(mag)):
-                    raise ValueError("zero magnitude cannot be written in DB format")
-            parts += [mag.tolist(), np.degrees(np.angle(v)).tolist()]
-    unit_txt = {"hz": "Hz", "khz": "kHz", "mhz": "MHz", "ghz": "GHz"}[unit.lower()]
-
-    def write(fh: IO) -> None:
-        for c in _comment_lines(data.comments):
-            fh.write(f"! {c}\n")
-        fh.write(f"# {unit_txt} Z {fmt.upper()} R {_fmt(r_ref)}\n")
-        for row in zip(fcol, *parts):
-            fh.write(" ".join([_fmt(x) for x in row]) + "\n")
-
-    _atomic_write(path, write)
+        zm = data.response(name)[:, None, None]
+    write_touchstone(path, data.frequency_hz, zm, "Z", form, unit, r_ref, _comment_lines(data.comments))
 
 
 # ---------------------------------------------------------------------------
@@ -2184,7 +2007,7 @@ def detect_format(path: PathLike) -> str:
     ext = p.suffix.lower()
     if ext == ".mat":
         return "mat"
-    if _TS_EXT_RE.fullmatch(ext) or ext == ".ts":
+    if _TS_EXT.fullmatch(ext) or ext == ".ts":
         return "touchstone"
     lines = _read_text_lines(p)
     first = None

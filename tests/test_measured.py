@@ -428,7 +428,6 @@ def _fail_after(n: int):
         lambda p, d: write_response_csv(p, d),
         lambda p, d: write_multisegment_csv(p, MeasuredResponses(d.frequency_hz, d.responses, segment="s")),
         lambda p, d: write_e4990a(p, d),
-        lambda p, d: write_touchstone_z(p, d),
         lambda p, d: write_waveform_csv(p, np.arange(len(d)) * 1e-6, d.mag("Zin"), d.mag("Zin"), d.mag("Zin")),
     ],
 )
@@ -441,6 +440,30 @@ def test_failed_write_leaves_original_intact(tmp_path, monkeypatch, writer):
         writer(target, random_responses(n=40))
     assert target.read_bytes() == original
     assert sorted(os.listdir(tmp_path)) == ["target.s1p"]  # no temporary left behind
+
+
+def test_failed_touchstone_write_leaves_original_intact(tmp_path, monkeypatch):
+    """Touchstone text comes from scikit-rf; a failure while it is written keeps the target."""
+    from pris_cosim import touchstone as T
+
+    target = tmp_path / "target.s1p"
+    original = b"original content\n"
+    target.write_bytes(original)
+
+    def failing(path, write, binary=False):
+        def half(fh):
+            fh.write("partial")
+            raise RuntimeError("simulated failure while writing")
+
+        return real(path, half, binary)
+
+    real = M._atomic_write
+    monkeypatch.setattr(M, "_atomic_write", failing)
+    with pytest.raises(RuntimeError, match="simulated failure"):
+        write_touchstone_z(target, random_responses(n=40))
+    assert target.read_bytes() == original
+    assert sorted(os.listdir(tmp_path)) == ["target.s1p"]
+    assert "Z RI R 50.0" in T.touchstone_text([1.0, 2.0], np.ones((2, 1, 1)), "Z")
 
 
 def test_failed_mat_write_leaves_original_intact(tmp_path, monkeypatch):

@@ -23,7 +23,26 @@ def register(subparsers: Any) -> None:
     p.add_argument("--rload", type=float, help="load resistance if known, Ohm (waveform data)")
     p.add_argument("--report", metavar="DIR", help="write report.md with plots into DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    sf = p.add_argument_group("SFRA (two-port Touchstone sweeps against a healthy fingerprint)")
+    sf.add_argument("--reference", metavar="FILE", help="healthy two-port sweep (.s2p); with a two-port --measured "
+                    "sweep, fits a winding model to it and names the change that explains --measured")
+    sf.add_argument("--sections", type=_sections, metavar="N", help="force the section count of the reference model")
+    sf.add_argument("--cache", metavar="DIR", help="reference-model cache (default $PRIS_COSIM_CACHE or "
+                    "~/.cache/pris-cosim)")
+    sf.add_argument("--no-cache", action="store_true", help="refit the reference model, do not use the cache")
+    sf.add_argument("--model-out", metavar="FILE", help="write the fitted fault model as a Touchstone file (.s2p)")
+    sf.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=cmd_diagnose)
+
+
+def _sections(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--sections must be an integer, got {text!r}") from None
+    if not 1 <= n <= 40:
+        raise argparse.ArgumentTypeError(f"--sections must be 1..40, got {n}")
+    return n
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
@@ -32,6 +51,20 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     from .fit import DiagnosisError
 
+    if getattr(args, "reference", None) is not None:
+        from estimation.sfra.cli import print_text, run_sfra
+
+        out = run_sfra(args)
+        if args.json:
+            _emit(_plain(out))
+        else:
+            print_text(out)
+            if args.report:
+                print(f"report: {out['report']}", file=sys.stderr)
+        return 0
+    for opt in ("sections", "cache", "model_out"):
+        if getattr(args, opt, None) is not None:
+            raise DiagnosisError(f"--{opt.replace('_', '-')} needs --reference")
     data = load_measured(args.measured, segment=args.segment)
     if isinstance(data, Waveforms):
         if None in (args.rpris, args.lpris, args.cpris):

@@ -1,0 +1,71 @@
+"""Diagnose the 16 shared inter-turn-short sweeps against the healthy reference.
+
+Prints per sweep: cause, located section and fraction, gain, wall time; the
+reference-fit time; and the Spearman rank correlation of the located
+position against the tap position, per kind (bolted, resistive).
+
+Usage: ``python benchmarks/bench_sfra.py [DATA_DIR] [--cache DIR]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import spearmanr
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from estimation.sfra.faults import diagnose_sweep  # noqa: E402
+from estimation.sfra.fingerprint import load_or_fit  # noqa: E402
+from estimation.sfra.sweep import load_sweep  # noqa: E402
+
+DEFAULT = ROOT / "tests" / "data" / "ipn_winding_interturn"
+#: Position NN -> first shorted tap (from the data's README).
+TAPS = {1: 3, 3: 15, 5: 27, 7: 39, 9: 51, 11: 63, 13: 75, 15: 87}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("data", nargs="?", default=str(DEFAULT))
+    ap.add_argument("--cache", default=None, help="reference-model cache directory")
+    ap.add_argument("--no-cache", action="store_true", help="always refit the reference")
+    a = ap.parse_args()
+    d = Path(a.data)
+    ref = load_sweep(d / "reference_23072517.s2p")
+    t = time.perf_counter()
+    fp = load_or_fit(ref, a.cache, use_cache=not a.no_cache)
+    t_fit = time.perf_counter() - t
+    print(f"reference: N = {fp.n_sections}, rms {fp.rms:.3f}, fit {fp.fit_seconds:.1f} s "
+          f"({'cached, load ' + format(t_fit, '.2f') + ' s' if fp.cached else 'fitted now'})")
+    out = {}
+    for kind, pattern in (("bolted", "bolted/230725{:02d}.s2p"), ("resistive", "resistive/23{:02d}.s2p")):
+        taps, locs = [], []
+        for nn, tap in TAPS.items():
+            p = d / pattern.format(nn)
+            if not p.is_file():
+                continue
+            t = time.perf_counter()
+            diag = diagnose_sweep(fp, ref, load_sweep(p), progress=False)
+            wall = time.perf_counter() - t
+            loc = diag.location()
+            sev = diag.severity() or {}
+            frac = loc["fraction"] if loc else float("nan")
+            print(f"{kind:<9} {p.name:<14} taps {tap}-{tap + 2}: {diag.cause:<20} section "
+                  f"{loc['section'] if loc else '-'}/{fp.n_sections} location {frac:.3f} gain {diag.gain:.3f} "
+                  f"R {sev.get('fault_resistance_ohm') or float('nan'):.3g} Ohm  {wall:.1f} s", flush=True)
+            taps.append(tap)
+            locs.append(frac)
+        ok = np.isfinite(locs)
+        rho = spearmanr(np.asarray(taps)[ok], np.asarray(locs)[ok])[0] if ok.sum() > 2 else float("nan")
+        out[kind] = rho
+        print(f"{kind}: Spearman rank correlation of location vs tap = {rho:+.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
