@@ -128,11 +128,11 @@ def test_cli_json_and_report(tmp_path, fingerprint):
     obj = json.loads(lines[0])
     assert obj["cause"] == "shorted-turns"
     assert obj["model_order"] == fingerprint.n_sections
-    assert 0 <= obj["location"]["fraction"] <= 1 and 1 <= obj["location"]["section"] <= obj["model_order"]
+    assert 0 <= obj["location"] <= 1 and 1 <= obj["section"] <= obj["model_order"]
     assert obj["severity"]["fault_resistance_ohm"] > 0 and 0 < obj["severity"]["shorted_fraction"] <= 1
     assert set(obj["indices"]) == {"below 2 kHz", "2-20 kHz", "20 kHz-1 MHz", "above 1 MHz"}
     for band in obj["indices"].values():
-        assert set(band) == {"points", "CC", "ASLE_dB", "SD_dB"}
+        assert set(band) == {"points", "cc", "asle", "sd"}
     for c in obj["candidates"]:
         assert set(c) >= {"cause", "section", "gain", "dBIC"} and c["gain"] > 0
     assert "NaN" not in lines[0] and "Infinity" not in lines[0]
@@ -279,10 +279,10 @@ def test_indices_match_the_published_formulas():
     x = np.array([-10.0, -20.0, -30.0, -25.0])
     y = np.array([-11.0, -19.0, -33.0, -25.0])
     v = band_indices(x, y)
-    assert v["CC"] == pytest.approx((110 + 380 + 990 + 625) / np.sqrt((100 + 400 + 900 + 625) * (121 + 361 + 1089 + 625)))
-    assert v["ASLE_dB"] == pytest.approx((1 + 1 + 3 + 0) / 4)
-    assert v["SD_dB"] == pytest.approx(np.sqrt((1 + 1 + 9 + 0) / 3))
-    assert band_indices(x[:1], y[:1])["CC"] is None
+    assert v["cc"] == pytest.approx((110 + 380 + 990 + 625) / np.sqrt((100 + 400 + 900 + 625) * (121 + 361 + 1089 + 625)))
+    assert v["asle"] == pytest.approx((1 + 1 + 3 + 0) / 4)
+    assert v["sd"] == pytest.approx(np.sqrt((1 + 1 + 9 + 0) / 3))
+    assert band_indices(x[:1], y[:1])["cc"] is None
 
 
 def test_touchstone_version_2_and_more_ports(tmp_path):

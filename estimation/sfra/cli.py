@@ -70,8 +70,8 @@ def run_sfra(args: argparse.Namespace) -> dict[str, Any]:
 
 def print_text(out: dict[str, Any]) -> None:
     """Human-readable summary on stdout."""
-    loc = out.get("location")
-    where = f"  section {loc['section']}/{out['model_order']} ({loc['fraction']:.3f} from port 1)" if loc else ""
+    where = (f"  section {out['section']}/{out['model_order']} ({out['location']:.3f} from port 1)"
+             if out.get("location") is not None else "")
     print(f"cause: {out['cause']}{where}  gain: {out['gain']:.3f}")
     sev = out.get("severity") or {}
     if sev.get("fault_resistance_ohm") is not None:
@@ -80,5 +80,5 @@ def print_text(out: dict[str, Any]) -> None:
     for c in out["candidates"]:
         print(f"  {c['cause']:<20} section {c['section']:>2}  gain {c['gain']:.3f}  dBIC {c['dBIC']:.1f}")
     for band, v in out["indices"].items():
-        if v["CC"] is not None:
-            print(f"  {band:<14} CC {v['CC']:.4f}  ASLE {v['ASLE_dB']:.3f} dB  SD {v['SD_dB']:.3f} dB")
+        if v["cc"] is not None:
+            print(f"  {band:<14} CC {v['cc']:.4f}  ASLE {v['asle']:.3f} dB  SD {v['sd']:.3f} dB")

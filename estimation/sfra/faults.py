@@ -160,12 +160,17 @@ class SfraDiagnosis:
         """The JSON object (indices added by the caller)."""
         return {
             "cause": self.cause,
-            "location": self.location(),
+            "location": (self.location() or {}).get("fraction"),
+            "section": (self.location() or {}).get("section"),
             "severity": self.severity(),
             "gain": round(self.gain, 6),
             "candidates": [c.as_json() for c in self.candidates],
             "model_order": self.fingerprint.n_sections,
+            "causes": [] if self.cause == "none" else [self.cause],
+            "steps": [] if self.cause == "none" or self.best is None else
+            [{"cause": self.cause, "gain": round(self.best.gain, 6), "delta_bic": round(self.best.dbic, 3)}],
             "baseline_cost": self.baseline_cost,
+            "extended_cost": self.best.cost if (self.best is not None and self.cause != "none") else self.baseline_cost,
             "n_residuals": self.n_residuals,
             "reference_fit": {"rms": self.fingerprint.rms, "resonances": self.fingerprint.resonances,
                               "tried": self.fingerprint.tried, "fit_seconds": self.fingerprint.fit_seconds,

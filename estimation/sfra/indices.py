@@ -47,12 +47,12 @@ def band_indices(x_db: np.ndarray, y_db: np.ndarray) -> dict[str, float | int | 
     y = np.asarray(y_db, dtype=float)
     n = x.size
     if n < 2:
-        return {"points": int(n), "CC": None, "ASLE_dB": None, "SD_dB": None}
+        return {"points": int(n), "cc": None, "asle": None, "sd": None}
     den = np.sqrt(np.sum(x * x) * np.sum(y * y))
     cc = float(np.sum(x * y) / den) if den > 0 else None
     d = y - x
-    return {"points": int(n), "CC": cc, "ASLE_dB": float(np.sum(np.abs(d)) / n),
-            "SD_dB": float(np.sqrt(np.sum(d * d) / (n - 1)))}
+    return {"points": int(n), "cc": cc, "asle": float(np.sum(np.abs(d)) / n),
+            "sd": float(np.sqrt(np.sum(d * d) / (n - 1)))}
 
 
 def comparison_indices(f: np.ndarray, h_ref: np.ndarray, h_new: np.ndarray) -> dict[str, dict]:

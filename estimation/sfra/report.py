@@ -121,10 +121,9 @@ def write_report(diag: SfraDiagnosis, out: dict, directory: str | os.PathLike) -
         f"**Cause: {diag.cause}**, gain {diag.gain:.3f}",
         "",
     ]
-    if out.get("location"):
-        loc = out["location"]
-        lines.append(f"Location: section {loc['section']} of {fp.n_sections}, "
-                     f"{loc['fraction']:.3f} of the winding from the port-1 end.")
+    if out.get("location") is not None:
+        lines.append(f"Location: section {out['section']} of {fp.n_sections}, "
+                     f"{out['location']:.3f} of the winding from the port-1 end.")
     if out.get("severity"):
         sev = {k: v for k, v in out["severity"].items() if v is not None}
         lines.append("Severity: " + ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}"
@@ -137,8 +136,8 @@ def write_report(diag: SfraDiagnosis, out: dict, directory: str | os.PathLike) -
     for band, v in out["indices"].items():
         def fmt(x, spec):
             return "-" if x is None else format(x, spec)
-        lines.append(f"| {band} | {v['points']} | {fmt(v['CC'], '.4f')} | {fmt(v['ASLE_dB'], '.3f')} | "
-                     f"{fmt(v['SD_dB'], '.3f')} |")
+        lines.append(f"| {band} | {v['points']} | {fmt(v['cc'], '.4f')} | {fmt(v['asle'], '.3f')} | "
+                     f"{fmt(v['sd'], '.3f')} |")
     lines += ["", "![end-to-end response](response.png)", "", "![winding](winding.png)", ""]
     path = d / "report.md"
     path.write_text("\n".join(lines))
