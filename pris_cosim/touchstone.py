@@ -141,6 +141,11 @@ class _Layout:
     cells: list[list[tuple[int, int]]] = field(default_factory=list)
 
 
+#: Reference resistances accepted in an option line, Ohm (analysers use 50 or 75 Ohm; the arithmetic of the
+#: S/Y/Z conversions stays finite inside this range).
+R_REF_RANGE = (1e-6, 1e9)
+
+
 def _parse_option(path: PathLike, s: str, ln: int, lay: _Layout) -> None:
     toks = s[1:].split()
     i = 0
@@ -161,8 +166,9 @@ def _parse_option(path: PathLike, s: str, ln: int, lay: _Layout) -> None:
                 r = float(toks[i + 1])
             except ValueError:
                 raise _error(path, f"reference resistance {_show(toks[i + 1])} is not a number", ln) from None
-            if not (math.isfinite(r) and r > 0):
-                raise _error(path, f"reference resistance must be > 0, got {r!r}", ln)
+            if not (math.isfinite(r) and R_REF_RANGE[0] <= r <= R_REF_RANGE[1]):
+                raise _error(path, f"reference resistance {r!r} Ohm is outside the physical range "
+                             f"{R_REF_RANGE[0]:g} .. {R_REF_RANGE[1]:g} Ohm", ln)
             lay.r_ref = r
             i += 1
         else:
