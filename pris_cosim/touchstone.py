@@ -50,7 +50,7 @@ __all__ = [
 EXTENSION_RE = re.compile(r"\.[a-z](\d+)p", re.IGNORECASE)
 
 _UNIT_SCALE = {"hz": 1.0, "khz": 1e3, "mhz": 1e6, "ghz": 1e9}
-_NUM_RE = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+_NUM_RE = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
 _NONFINITE_RE = re.compile(r"[+-]?(?:nan|inf|infinity)", re.IGNORECASE)
 
 
@@ -273,6 +273,11 @@ def _scan(path: PathLike, lines: Sequence[str], want_ports: int | None) -> _Layo
     return lay
 
 
+#: Largest decimal exponent of a magnitude in a data cell: products of two such values (the S/Y/Z
+#: conversions) stay finite in double precision.
+MAX_LOG10_MAGNITUDE = 150
+
+
 def _check_values(path: PathLike, lay: _Layout) -> None:
     raw, lines = lay.raw, lay.record_lines
     with np.errstate(over="ignore"):
@@ -296,12 +301,21 @@ def _check_values(path: PathLike, lay: _Layout) -> None:
             r, c = bad[0]
             ln, pos = lay.cells[r][1 + 2 * c]
             raise _error(path, f"negative magnitude {_r(a[r, c])}", ln, pos)
-    elif lay.fmt == "db":
-        bad = np.argwhere(np.abs(a) > 6000.0)  # 10**(6000/20) = 1e300: beyond double precision
+    if lay.fmt == "db":
+        bad = np.argwhere(np.abs(a) > 20.0 * MAX_LOG10_MAGNITUDE)
         if bad.size:
             r, c = bad[0]
             ln, pos = lay.cells[r][1 + 2 * c]
-            raise _error(path, f"magnitude {_r(a[r, c])} dB is outside -6000 .. 6000 dB", ln, pos)
+            lim = 20 * MAX_LOG10_MAGNITUDE
+            raise _error(path, f"magnitude {_r(a[r, c])} dB is outside -{lim:g} .. {lim:g} dB", ln, pos)
+    else:  # RI: both parts; MA: the magnitude
+        cols = raw[:, 1:] if lay.fmt == "ri" else a
+        bad = np.argwhere(np.abs(cols) > 10.0 ** MAX_LOG10_MAGNITUDE)
+        if bad.size:
+            r, c = bad[0]
+            ln, pos = lay.cells[r][1 + (c if lay.fmt == "ri" else 2 * c)]
+            raise _error(path, f"value {_r(cols[r, c])} is outside +-1e{MAX_LOG10_MAGNITUDE} (the parameter "
+                         "conversions would overflow)", ln, pos)
 
 
 def _read_lines(path: PathLike) -> list[str]:
