@@ -73,7 +73,8 @@ def poles_residues(ss: StateSpace, input_index: int = 0) -> tuple[PolesResidues,
             Vi = np.linalg.inv(V)
         except np.linalg.LinAlgError:
             Vi = np.full_like(V, np.nan)
-    w = (Vi @ b)[:, :, 0]  # (P, n): left eigenvectors times the input
+    w = np.linalg.solve(V, b.astype(complex))[:, :, 0] if np.all(np.isfinite(Vi)) else (Vi @ b)[:, :, 0]
+    # (P, n): left eigenvectors times the input (a solve is more accurate than the inverse when V is ill conditioned)
     cv = ss.C @ V  # (P, ny, n)
     residues = cv * w[:, None, :]
     cond = np.linalg.norm(V, axis=(1, 2)) * np.linalg.norm(Vi, axis=(1, 2))
