@@ -181,7 +181,11 @@ def pole_residue_sum(poles: np.ndarray, residues: np.ndarray, direct: np.ndarray
     numpy.ndarray
         ``(P, ny, F)`` complex responses.
     """
-    P, ny, n = residues.shape
+    P = max(poles.shape[0], residues.shape[0], direct.shape[0])  # any of them may be one set, broadcast
+    _, ny, n = residues.shape
+    poles = np.broadcast_to(poles, (P, n))
+    residues = np.broadcast_to(residues, (P, ny, n))
+    direct = np.broadcast_to(direct, (P, ny))
     omega = np.ascontiguousarray(omega, float)
     out = np.zeros((P, ny, omega.size), complex)
     kern = _jit("pairs") if P * n * omega.size >= COMPILED_MIN_WORK else None
@@ -221,8 +225,12 @@ def hessenberg_solve(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray,
     """
     from scipy.linalg import hessenberg, matrix_balance
 
-    P, n, _ = A.shape
-    ny = C.shape[1]
+    P = max(A.shape[0], B.shape[0], C.shape[0], D.shape[0])  # any of them may be one set, broadcast
+    n, ny = A.shape[1], C.shape[1]
+    A = np.broadcast_to(A, (P, n, n))
+    B = np.broadcast_to(B, (P, n))
+    C = np.broadcast_to(C, (P, ny, n))
+    D = np.broadcast_to(D, (P, ny))
     omega = np.ascontiguousarray(omega, float)
     H = np.empty((P, n, n))
     bt = np.empty((P, n))

@@ -58,3 +58,18 @@ def test_hessenberg_solve_handles_a_defective_matrix(compiled, monkeypatch):
     exact = 1.0 / (1j * omega + a) ** 3  # closed form of the triple pole
     got = K.hessenberg_solve(A, B, C, D, omega)[0, 0]
     assert np.max(np.abs(got - exact) / np.abs(exact)) < 1e-10
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_single_set_broadcasts_against_a_population(compiled, monkeypatch):
+    """A feed-through (or any input) given for one set serves every set of the population, never read past its end."""
+    monkeypatch.setattr(K, "COMPILED_MIN_WORK", 0 if compiled else 10**12)
+    A, B, C, D = _random_stable(np.random.default_rng(5), 6, 5)
+    omega = np.logspace(1, 6, 40)
+    lam, V = np.linalg.eig(A)
+    res = (C @ V) * np.linalg.solve(V, B[:, :, None].astype(complex))[:, :, 0][:, None, :]
+    one = K.pole_residue_sum(lam, res, D[:1], omega)
+    full = K.pole_residue_sum(lam, res, np.repeat(D[:1], 6, axis=0), omega)
+    assert np.array_equal(one, full)
+    hs = K.hessenberg_solve(A, B, C, D[:1], omega)
+    assert np.allclose(hs, K.hessenberg_solve(A, B, C, np.repeat(D[:1], 6, axis=0), omega), rtol=1e-12, atol=0)
