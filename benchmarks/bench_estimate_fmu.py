@@ -18,7 +18,7 @@ comparison record; three-section: 10 ms). Printed:
    couplings k12, k13, k23 within 0.85 .. 0.95, thesis Table 4.8): parameter
    errors, FMU runs (failed ones), wall time, the verdict.
 
-Peers on the two-section record (issue 18): estim8 and ModestPy reached
+Peers tried on the same two-section record (estim8 0.1.6, ModestPy 0.1.1) reached
 errors up to ~800 %, the earlier pris-cosim time approach 534 %.
 Wall times depend on the machine's load; they are printed as measured.
 """
