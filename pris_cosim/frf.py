@@ -22,7 +22,7 @@ import numpy as np
 
 from .circuit import Circuit, Numeric
 from .errors import CircuitError
-from .frf_kernels import hessenberg_solve, pole_residue_sum
+from .frf_kernels import hessenberg_solve, pole_residue_sum, pole_sum
 from .mna import MNA, StateSpace
 from .sparse_ac import SparseMNA, use_sparse
 
@@ -47,12 +47,7 @@ class PolesResidues:
 
     def evaluate(self, s: np.ndarray, chunk: int = 256) -> np.ndarray:
         """Values at complex frequencies ``s`` (rad/s); shape ``(P, ny, F)``."""
-        P, ny, _ = self.residues.shape
-        out = np.empty((P, ny, s.size), complex)
-        for p0 in range(0, P, chunk):
-            inv = 1.0 / (s[None, None, :] - self.poles[p0 : p0 + chunk, :, None])  # (Pc, n, F)
-            out[p0 : p0 + chunk] = self.residues[p0 : p0 + chunk] @ inv + self.direct[p0 : p0 + chunk, :, None]
-        return out
+        return pole_sum(self.poles, self.residues, self.direct, s, chunk)
 
 
 def poles_residues(ss: StateSpace, input_index: int = 0) -> tuple[PolesResidues, np.ndarray]:

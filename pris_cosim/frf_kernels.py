@@ -187,18 +187,29 @@ def pole_residue_sum(poles: np.ndarray, residues: np.ndarray, direct: np.ndarray
     residues = np.broadcast_to(residues, (P, ny, n))
     direct = np.broadcast_to(direct, (P, ny))
     omega = np.ascontiguousarray(omega, float)
-    out = np.zeros((P, ny, omega.size), complex)
     kern = _jit("pairs") if P * n * omega.size >= COMPILED_MIN_WORK else None
     if kern is not None:
+        out = np.zeros((P, ny, omega.size), complex)
         with warnings.catch_warnings():  # numba's cache notices (e.g. a read-only install) are not the user's business
             warnings.simplefilter("ignore")
             kern(np.ascontiguousarray(poles, complex), np.ascontiguousarray(residues, complex),
                  np.ascontiguousarray(direct.real, float), omega, out)
         return out
-    s = 1j * omega
-    for p0 in range(0, P, 64):  # the plain sum over every pole, in bounded temporaries
-        inv = 1.0 / (s[None, None, :] - poles[p0 : p0 + 64, :, None])  # (Pc, n, F)
-        out[p0 : p0 + 64] = residues[p0 : p0 + 64] @ inv + direct[p0 : p0 + 64, :, None]
+    return pole_sum(poles, residues, direct, 1j * omega)
+
+
+def pole_sum(poles: np.ndarray, residues: np.ndarray, direct: np.ndarray, s: np.ndarray,
+             chunk: int = 256) -> np.ndarray:
+    """``sum_k r_k / (s - p_k) + d`` at any complex frequencies ``s`` (rad/s), plain numpy over every pole.
+
+    Shapes as :func:`pole_residue_sum` (``s`` of shape ``(F,)``); parameter sets are taken ``chunk`` at a
+    time so the ``(chunk, n, F)`` temporaries stay bounded.
+    """
+    P, ny, _ = residues.shape
+    out = np.empty((P, ny, s.size), complex)
+    for p0 in range(0, P, chunk):
+        inv = 1.0 / (s[None, None, :] - poles[p0 : p0 + chunk, :, None])  # (Pc, n, F)
+        out[p0 : p0 + chunk] = residues[p0 : p0 + chunk] @ inv + direct[p0 : p0 + chunk, :, None]
     return out
 
 
