@@ -1,8 +1,8 @@
 """``pris-cosim estimate`` with its defaults on ten random targets per built-in model.
 
-Each target draws every free value of the model log-uniformly within a factor
-``--spread`` of its nominal value (couplings uniformly within +-2 %, kept
-below 1). Its responses (every configuration of the model, on the default
+Each target draws every parameter of the default estimation vector
+log-uniformly within a factor ``--spread`` of its nominal value and inside
+the default bounds (couplings uniformly within +-2 %). Its responses (every configuration of the model, on the default
 band, 200 log-spaced points) come from the admittance-matrix solver in
 ``tests/test_estimate_defaults.py``, which shares nothing with the
 estimation's state-space and pole-residue paths. The estimate then runs with
@@ -31,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from test_estimate_defaults import nodal_voltages, write_responses  # noqa: E402
+from test_estimate_defaults import draw_target, target_responses, write_responses  # noqa: E402
 
 from estimation import cli  # noqa: E402
 from estimation.estimate import default_band  # noqa: E402
@@ -39,35 +39,6 @@ from pris_cosim.models import get_model  # noqa: E402
 
 MODELS = ["two-section", "three-section", "cascade-4", "hv-4section", "hv-4section-cab2a", "hv-4section-cab2b",
           "hv-6section-passive"]
-
-
-def draw(model, rng: np.random.Generator, spread: float) -> dict[str, float]:
-    """Random free values around the nominal ones (SI units)."""
-    rows = {r["name"].lower(): r for r in model.circuit.summary()}
-    out = {}
-    for name in model.circuit.free_names():
-        row = rows[name.lower()]
-        v = float(row["value"])
-        if row["kind"] == "K" or (row["kind"] == "param" and not row["unit"] and abs(v) < 1):  # couplings
-            out[name] = float(np.clip(v * rng.uniform(0.98, 1.02), -0.9999, 0.9999))
-        else:
-            out[name] = v * spread ** rng.uniform(-1, 1)
-    return out
-
-
-def responses(model, values: dict, f: np.ndarray) -> dict[str, np.ndarray]:
-    """Every configuration's responses by the independent nodal solver."""
-    out = {}
-    for cfg in model.configurations.values():
-        circuit = model.circuit.shorted(cfg.shorts) if cfg.shorts else model.circuit
-        v = nodal_voltages(circuit, circuit.resolve(values, check=False), cfg.port, f)
-        for r in cfg.responses:
-            if r.node is None:
-                out[r.name] = v[cfg.port]
-            else:
-                num = v[r.node] - (v[r.minus] if r.minus and r.minus != "0" else 0.0)
-                out[r.name] = num / v[cfg.port]
-    return out
 
 
 def run_model(name: str, targets: int, spread: float, tol: float, tmp: Path) -> dict:
@@ -78,9 +49,9 @@ def run_model(name: str, targets: int, spread: float, tol: float, tmp: Path) -> 
     rng = np.random.default_rng(2026)
     rows = []
     for i in range(targets):
-        t = draw(model, rng, spread)
+        t, full = draw_target(model, rng, spread)
         path = tmp / f"{name}-{i}.csv"
-        write_responses(path, f, responses(model, t, f))
+        write_responses(path, f, target_responses(model, full, f))
         t0 = time.perf_counter()
         out = cli.run_estimate({"model": name, "target": {"kind": "responses-csv", "path": str(path)},
                                 "frequency": {"points": 200}, "seed": i + 1}, progress=False)
@@ -94,7 +65,7 @@ def run_model(name: str, targets: int, spread: float, tol: float, tmp: Path) -> 
                      "non_identifiable": out["non_identifiable"]})
         print(f"  {name} target {i}: worst {max(err.values()):.2e} %, converged {out['converged']}, "
               f"right-or-says-so {honest}, {wall:.1f} s", file=sys.stderr)
-    return {"model": name, "parameters": len(model.circuit.free_names()), "targets": targets,
+    return {"model": name, "parameters": len(cli._parameter_set(model, {}).varying), "targets": targets,
             "within_tolerance": sum(not r["wrong"] for r in rows),
             "converged_and_within": sum((not r["wrong"]) and r["converged"] for r in rows),
             "right_or_says_so": sum(r["honest"] for r in rows),

@@ -58,8 +58,12 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
 
     Defaults (``estimation.estimate``): GA + L-BFGS-B sized to the number of
     parameters, a least-squares polish on the approach's own residuals, 3
-    restarts; the two-section model's thesis ties R2 = R1, C2 = C1 when the
-    config names neither parameters nor ties, the three-section model's
+    restarts (more, up to 8, while none reaches the data's noise floor); for an
+    input impedance with sharp resonances, the first stage also matches the
+    resonance frequencies (refined by vector fitting) to the estimate's modes;
+    the two-section model's thesis ties R2 = R1, C2 = C1 and the 4-section
+    cascade's uniform winding (equal sections, couplings K12^d at distance d)
+    when the config names neither parameters nor ties, the three-section model's
     Table 4.8 bounds when it names no parameters; mutual inductances searched as
     their coupling coefficient (|k| < 1 in the parametrisation).
 
@@ -431,6 +435,11 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
                                          metric, fmin, fmax, probe_w, v_bprbs if drive == "bridge" else None)
     else:
         raise EstimationInputError(f"approach must be frequency, frequency-simulated, time, emd or iemd (got {approach_name!r})")
+    from .estimate import resonance_proxy
+
+    stand_in = proxy if proxy is not None else approach
+    if isinstance(stand_in, ap.AnalyticFrequency):
+        proxy = resonance_proxy(stand_in, params, circuit, conf) or proxy
     return _fit_and_report(cfg, approach, params, model, approach_name, metric, known_target, t0, progress,
                            proxy)
 
@@ -529,8 +538,9 @@ def _fit_and_report(cfg: dict[str, Any], approach: Any, params: Any, model: Any,
         plan["options"] = _need(cfg, "options", dict, {})
     if b.get("max_evals") is not None:
         plan["budget"] = Budget(max_evals=max(1, int(b["max_evals"]) // int(plan["restarts"])))
+        plan["max_restarts"] = plan["restarts"]  # a stated budget is not exceeded by extra restarts
     if "restarts" in b:
-        plan["restarts"] = int(b["restarts"])
+        plan["restarts"] = plan["max_restarts"] = int(b["restarts"])
     data = frequency_data(approach) if hasattr(approach, "target") else np.asarray(approach.v_target, float)
     try:
         outcome = run_plan(approach, params, data, seed=int(_need(cfg, "seed", int, 1)), plan=plan, proxy=proxy,

@@ -13,7 +13,9 @@ study, thesis Table 4.5; three-section study, Tables 4.9/4.10):
    (Jacobian-scaled, :func:`estimation.studies.common.least_squares_polish`,
    ``30 + 10 n`` evaluations of the residuals),
    which moves the weakly sensitive resistances that the summed cost hides;
-3. ``restarts`` independent seeds (3 up to 12 parameters, 2 above); the
+3. ``restarts`` independent seeds (3 up to 12 parameters, 2 above), and more
+   (up to ``max_restarts``, ``2 restarts + 2``) while none has brought the
+   residual RMS down to three times the data's noise floor; the
    lowest own cost is kept and the others tell whether the answer is unique
    (:mod:`estimation.verdict`); when the verdict finds the best one short of
    its minimum (a Gauss-Newton step would still move a parameter), it is
@@ -39,11 +41,18 @@ import numpy as np
 from . import approaches as ap
 from .optimisers import Budget, minimize
 from .parameters import ParameterSet
-from .verdict import verdict
+from .verdict import noise_floor, verdict
 
 #: Ties assumed when a config names neither parameters nor ties: the thesis's estimation vectors
-#: (two-section 4.1.3: R2 = R1, C2 = C1).
-DEFAULT_TIES: dict[str, dict[str, str]] = {"two-section": {"R2": "R1", "C2": "C1"}}
+#: (two-section 4.1.3: R2 = R1, C2 = C1) and, for the 4-section cascade, the uniform winding of the
+#: three-section study (4.2: equal sections) with the model's own coupling law, a coupling decaying
+#: geometrically with the distance between sections (K13 = K12^2, K14 = K12^3, Fig. 2.6). One port
+#: impedance cannot tell 22 free values apart.
+DEFAULT_TIES: dict[str, dict[str, str]] = {
+    "two-section": {"R2": "R1", "C2": "C1"},
+    "cascade-4": {**{f"{e}{i}": f"{e}1" for e in ("R", "L", "C", "Cg") for i in (2, 3, 4)},
+                  "K23": "K12", "K34": "K12", "K13": "K12**2", "K24": "K12**2", "K14": "K12**3"},
+}
 
 #: Bounds assumed when a config names no parameters: the thesis's search spaces (three-section:
 #: Table 4.8, R, L, C over three decades, couplings 0.85 .. 0.95). Other models: a tenth to ten
@@ -55,6 +64,10 @@ DEFAULT_BOUNDS: dict[str, dict[str, tuple[float, float]]] = {
 
 #: Bins of the record's own Welch H1 used by the stand-in cost: coherence at least this.
 COHERENCE_MIN = 0.99
+
+#: Resonance stage of a frequency-response target: smallest prominence of a peak of log10 |Zin|
+#: (decades), at most this many peaks, weight of their log-frequency residuals.
+PEAK_PROMINENCE, PEAK_COUNT, PEAK_WEIGHT = 0.3, 8, 100.0
 
 
 def default_plan(n: int, per_eval_s: float | None = None) -> dict[str, Any]:
@@ -74,7 +87,7 @@ def default_plan(n: int, per_eval_s: float | None = None) -> dict[str, Any]:
             "options": {"global_options": {"pop_size": pop, "max_generations": gens},
                         "local_options": {"max_iter": 200}, "global_share": 0.85},
             "budget": Budget(max_evals=int(pop * (gens + 1) / 0.85)),
-            "restarts": restarts, "polish_iterations": 30 + 10 * n}
+            "restarts": restarts, "max_restarts": 2 * restarts + 2, "polish_iterations": 30 + 10 * n}
 
 
 @dataclass
@@ -134,9 +147,14 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
     stages: list[dict[str, Any]] = []
     nfev = 0
     best_x, best_c, message = None, math.inf, ""
-    for k in range(int(plan["restarts"])):
+    floor = 3.0 * (noise_floor(np.asarray(data, float)) if noise is None else float(noise))
+    floor = max(floor, 1e-6 * float(np.sqrt(np.mean(np.square(np.asarray(data, float))))) if np.size(data) else 0.0)
+    more = int(plan.get("max_restarts", plan["restarts"]))
+    for k in range(max(int(plan["restarts"]), more)):
         if time_limit_s is not None and k > 0 and time.perf_counter() - t0 > time_limit_s:
             break
+        if k >= int(plan["restarts"]) and min(e[1] for e in ends) <= floor:
+            break  # the planned restarts reached the noise floor: no more needed
         budget = plan["budget"]
         if time_limit_s is not None:
             left = max(1.0, time_limit_s - (time.perf_counter() - t0))
@@ -159,7 +177,7 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
         stages.append({"restart": k + 1, "seed": seed + k, "stage1_cost": float(r1.fun), "cost": c,
                        "residual_rms": rms, "evaluations": int(r1.nfev) + n_pol + 1})
         if progress:
-            print(f"estimate: restart {k + 1}/{plan['restarts']}: cost {c:.4g} (residual RMS {rms:.3g}), "
+            print(f"estimate: restart {k + 1}/{plan['restarts'] if k < int(plan['restarts']) else more}: cost {c:.4g} (residual RMS {rms:.3g}), "
                   f"{time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
         if c < best_c or best_x is None:
             best_x, best_c, message = x, c, msg
@@ -202,6 +220,101 @@ def default_band(model: Any, configuration: Any, override_values: Mapping[str, f
     if not f.size:
         return 10.0, 1e6
     return float(max(f.min() / 5, 1e-3)), float(f.max() * 5)
+
+
+def resonance_proxy(approach: ap.Approach, params: ParameterSet, circuit: Any, configuration: Any
+                    ) -> ap.Approach | None:
+    """Stage-1 stand-in of a frequency-response target with sharp resonances: log-magnitude plus resonance frequencies.
+
+    A winding's input impedance has resonances far sharper than the compared
+    grid; the log-magnitude cost alone has several valleys of nearly equal
+    depth there (a resonance matched by different capacitance, inductance and
+    coupling combinations, thesis 4.2, Fig. 4.19). The peaks of the target's
+    ``|Zin|`` (prominence at least :data:`PEAK_PROMINENCE` decades, refined by a
+    parabola in log frequency) are the poles of the input impedance: the
+    eigenvalues of the configuration's state matrix with a current drive at its
+    port. The stand-in adds, per target peak, ``PEAK_WEIGHT * ln(f_peak / f_mode)``
+    to the nearest mode of the estimate (:class:`estimation.studies.modal.ResonanceProxy`).
+
+    Returns None when the approach compares no input impedance or the target has no such peak.
+    """
+    from types import SimpleNamespace
+
+    from pris_cosim.mna import MNA
+
+    from .studies import modal
+
+    target = getattr(approach, "target", None)
+    f = getattr(approach, "f", None)
+    names = [r.name for r in configuration.responses if r.node is None]
+    if target is None or f is None or not names or names[0] not in target or np.size(f) < 5:
+        return None
+    f = np.asarray(f, float)
+    order = np.argsort(f)
+    lf = np.log10(f[order])
+    # peaks on a uniform log-frequency grid (the target's own points, interpolated in log magnitude)
+    grid = np.linspace(lf[0], lf[-1], max(lf.size, 2 * lf.size))
+    mag = np.interp(grid, lf, np.log10(np.maximum(np.abs(np.asarray(target[names[0]]))[order], 1e-300)))
+    peaks = 10 ** modal.response_peaks(grid, 10 ** mag, PEAK_PROMINENCE, PEAK_COUNT)
+    if not peaks.size:
+        return None
+    peaks = refine_resonances(f[order], np.asarray(target[names[0]])[order], peaks)
+    shorted = circuit.shorted(configuration.shorts) if configuration.shorts else circuit
+    engine = SimpleNamespace(circuit=shorted, mna=MNA(shorted, current_inputs=[configuration.port]))
+    guide = modal.ModalGuide(params, engine, peaks, np.ones_like(peaks), damping_weight=0.0)  # type: ignore[arg-type]
+    return modal.ResonanceProxy(approach, guide, PEAK_WEIGHT)
+
+
+def refine_resonances(f: np.ndarray, z: np.ndarray, peaks: np.ndarray) -> np.ndarray:
+    """Resonance frequencies (Hz) of an impedance, sharper than its sampling: peaks moved to fitted poles.
+
+    A resonance far sharper than the frequency grid peaks between two samples;
+    its sampled peak is off by up to half a step (a few percent on 200 points
+    per band). A rational fit of the whole impedance (vector fitting,
+    scikit-rf's :class:`skrf.vectorFitting.VectorFitting`, Gustavsen and
+    Semlyen 1999; two real and ``2 len(peaks) + 4`` complex pole pairs) places
+    the poles far more precisely. Each peak moves to the nearest fitted pole
+    when that pole lies within one grid step of it; a peak with no such pole
+    is dropped when others have one (a shoulder, or a peak off its pole by
+    more than a step), and a failed fit changes nothing.
+
+    Parameters
+    ----------
+    f : numpy.ndarray, Hz
+        ``(F,)`` increasing frequencies of the samples.
+    z : numpy.ndarray, Ohm
+        ``(F,)`` complex impedance.
+    peaks : numpy.ndarray, Hz
+        Peak frequencies of ``|z|`` on the samples.
+    """
+    import warnings
+
+    import skrf
+    from skrf.vectorFitting import VectorFitting
+
+    peaks = np.asarray(peaks, float)
+    step = float(np.median(np.diff(np.log(f)))) if f.size > 1 else 0.0
+    try:
+        nw = skrf.Network(frequency=skrf.Frequency.from_f(f, unit="hz"), z=np.asarray(z).reshape(-1, 1, 1), z0=50.0)
+        vf = VectorFitting(nw)
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            vf.vector_fit(n_poles_real=2, n_poles_cmplx=2 * int(peaks.size) + 4, parameter_type="z",
+                          init_pole_spacing="log")
+        p = np.asarray(vf.poles)
+    except Exception:  # noqa: BLE001 - the fit is a refinement only
+        return peaks
+    fp = p.imag[(p.imag > 0) & (p.real < 0)] / (2 * np.pi)
+    if not fp.size:
+        return peaks
+    out, refined = peaks.copy(), np.zeros(peaks.size, bool)
+    for i, pk in enumerate(peaks):
+        d = np.abs(np.log(fp / pk))
+        j = int(np.argmin(d))
+        if d[j] <= step:
+            out[i], refined[i] = fp[j], True
+    # where the fit found some resonances, a peak it does not confirm is a shoulder or lies off its pole
+    return out[refined] if refined.any() else out
 
 
 def waveform_specs(configuration: Any, channels: Mapping[str, np.ndarray]) -> list[ap.ResponseSpec]:
@@ -312,4 +425,5 @@ def frequency_data(approach: ap.Approach) -> np.ndarray:
     return np.concatenate([np.log10(np.abs(np.asarray(v))) for v in approach.target.values()])  # type: ignore[attr-defined]
 
 
-__all__ = ["DEFAULT_BOUNDS", "default_band", "RecordTime", "RecordEMD", "RecordIEMD", "waveform_specs", "DEFAULT_TIES", "default_plan", "run_plan", "Outcome", "waveform_proxy", "frequency_data", "COHERENCE_MIN"]
+__all__ = ["DEFAULT_BOUNDS", "default_band", "RecordTime", "RecordEMD", "RecordIEMD", "waveform_specs", "DEFAULT_TIES", "default_plan", "run_plan", "Outcome", "waveform_proxy", "frequency_data", "COHERENCE_MIN",
+           "resonance_proxy", "refine_resonances"]

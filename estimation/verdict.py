@@ -11,7 +11,8 @@ Every answer of ``pris-cosim estimate`` carries a verdict (:func:`verdict`):
       differences, which removes a smooth response) and ``scale`` is the
       RMS of the data (decades for log-magnitude responses, volts for
       waveforms);
-    - no parameter ends within 1e-3 (unit-cube coordinate) of a bound;
+    - no parameter ends within 1e-3 (unit-cube coordinate) of a bound, unless the residual is within
+      the noise floor (the bound then limits nothing) and no coupling was repaired;
     - the estimate is a minimum: a Gauss-Newton step from it would move no
       parameter by more than 0.1 %;
     - the restarts that reach the best cost agree on every parameter to
@@ -204,7 +205,9 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
     at_bound = [k for k, ui in zip(names, u) if ui <= AT_BOUND or ui >= 1 - AT_BOUND]
     if bool(np.any(ev.repaired)):
         at_bound += [k for k in params.couplings + params.mutuals() if k in names and k not in at_bound]
-    if at_bound:
+    if at_bound and (not rms <= tol or bool(np.any(ev.repaired))):
+        # a bound limits the answer only when the fit is short of the data's noise floor (or a coupling was
+        # repaired); a value near a bound that explains the data to its noise is the answer
         reasons.append(f"{', '.join(at_bound)} at a bound")
     # restarts: those reaching the best residual agree?
     agreeing, differing, reached = 1, set(), 1

@@ -70,6 +70,46 @@ def two_section_target(rng: np.random.Generator) -> dict[str, float]:
             "M12": k * math.sqrt(L1 * L2)}
 
 
+def draw_target(model, rng: np.random.Generator, spread: float = 2.0) -> tuple[dict, dict]:
+    """Random target of the default estimation vector: ``(drawn parameters, every circuit value)``.
+
+    Each varying parameter is drawn log-uniformly within a factor ``spread`` of its nominal value and
+    inside its default bounds; a coupling (``K``, or the ``M`` of a coupling element) moves its
+    coefficient uniformly within +-2 % inside its bounds. Tied parameters follow their ties.
+    """
+    params = cli._parameter_set(model, {})
+    u_nominal = params.to_unit(params.values())
+    u = np.empty_like(u_nominal)
+    for i, name in enumerate(params.varying):
+        p = params[name]
+        if p.kind in ("K", "M"):
+            k = p.min + u_nominal[i] * (p.max - p.min)  # couplings map linearly to the cube
+            k = float(np.clip(k * rng.uniform(0.98, 1.02), p.min, p.max))
+            u[i] = (k - p.min) / (p.max - p.min)
+        else:
+            v = float(p.value)
+            lo, hi = max(p.min, v / spread), min(p.max, v * spread)
+            u[i] = p.to_unit(10 ** rng.uniform(math.log10(lo), math.log10(hi)))
+    values = params.values(u)
+    drawn = {k: float(values[k]) for k in params.varying}
+    return drawn, {k: float(v) for k, v in params.overrides(u).items()}
+
+
+def target_responses(model, values: dict, f: np.ndarray) -> dict[str, np.ndarray]:
+    """Every configuration's responses of ``model`` at ``values``, by the nodal solver above."""
+    out = {}
+    for cfg in model.configurations.values():
+        circuit = model.circuit.shorted(cfg.shorts) if cfg.shorts else model.circuit
+        v = nodal_voltages(circuit, circuit.resolve(values, check=False), cfg.port, f)
+        for r in cfg.responses:
+            if r.node is None:
+                out[r.name] = v[cfg.port]
+            else:
+                num = v[r.node] - (v[r.minus] if r.minus and r.minus != "0" else 0.0)
+                out[r.name] = num / v[cfg.port]
+    return out
+
+
 def write_responses(path, f, resp):
     cols = ["frequency_hz"] + [f"{r}_{p}" for r in resp for p in ("re", "im")]
     rows = [",".join(cols)]
