@@ -36,7 +36,8 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
           },                                      #   simulated targets: "method" "analytic" or "pris" (Welch H1)
           "approach": "frequency",                # "frequency" (analytic estimate), "frequency-simulated",
                                                   # "time", "emd", "iemd"
-          "responses": ["Zin"],                   # frequency approaches (default: all of the configuration)
+          "responses": ["Zin"],                   # frequency approaches (default: all of the configuration;
+                                                  # a response file: every configuration it holds, jointly)
           "frequency": {"fmin": 20, "fmax": 9000, "points": 200},   # default band: see estimation.estimate
           "source": {"vdc": 30, "prbs_order": 12, "fclk": 1e4, "rpris": 31800, "lpris": 2.53, "cpris": 1e-8},
           "fs": 300000, "duration": 0.3,          # simulated perturbation: sampling rate (Hz), record (s)
@@ -271,7 +272,7 @@ def _read_record(tgt: dict[str, Any]) -> Any:
 def _parameter_set(model: Any, cfg: dict[str, Any]) -> Any:
     from .parameters import ParameterSet
 
-    from .estimate import DEFAULT_BOUNDS, DEFAULT_TIES
+    from .estimate import DEFAULT_BASE, DEFAULT_BOUNDS, DEFAULT_TIES
 
     spec = _need(cfg, "parameters", dict, {})
     ties = _need(cfg, "ties", dict, {})
@@ -279,6 +280,11 @@ def _parameter_set(model: Any, cfg: dict[str, Any]) -> Any:
         ties = dict(DEFAULT_TIES.get(model.name, {}))
     if not spec:
         spec = {k: {"min": lo, "max": hi} for k, (lo, hi) in DEFAULT_BOUNDS.get(model.name, {}).items()}
+    if not spec and model.name in DEFAULT_BASE:
+        from pris_cosim.models import get_model
+
+        keep = set(model.circuit.free_names())
+        spec = {k: {} for k in get_model(DEFAULT_BASE[model.name]).circuit.free_names() if k in keep}
     names = list(spec) + [t for t in ties if t not in spec] if spec else None
     bounds = {}
     for k, v in spec.items():
@@ -374,6 +380,14 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
             data = read_response_csv(tgt["path"])
             f = data.frequency_hz
             sel = (f >= fmin) & (f <= fmax)
+            confs = [conf]
+            if "configuration" not in cfg and "responses" not in cfg and len(model.configurations) > 1:
+                # every configuration whose responses the file holds, compared jointly (thesis 5.3)
+                confs = [c for c in model.configurations.values()
+                         if all(r.name in data.responses for r in c.responses)] or [conf]
+                conf = confs[0]
+                responses = [r.name for c in confs for r in c.responses]
+                cost = ap.frequency_cost(metric, responses)
             missing = [r for r in responses if r not in data.responses]
             if missing:
                 raise EstimationInputError(f"response {missing[0]!r} is not in {tgt['path']}")
@@ -381,7 +395,8 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
             f = f[sel]
             if approach_name != "frequency":
                 raise EstimationInputError("a measured response target needs approach 'frequency'")
-            approach: ap.Approach = ap.AnalyticFrequency(params, model.response_set([conf.name]), f, target, cost)
+            approach: ap.Approach = ap.AnalyticFrequency(params, model.response_set([c.name for c in confs]), f,
+                                                         target, cost)
         elif kind == "simulated":
             specs = [ap.TWO_SECTION_SPECS.get(r, ap.ResponseSpec(r, "i_in", "v_in")) for r in responses]
             method = tgt.get("method", "analytic" if approach_name == "frequency" else "pris")

@@ -211,3 +211,59 @@ def test_two_section_ten_independent_targets(tmp_path):
         good += all(err[k] < 1.0 for k in ("C1", "L1", "L2", "M12"))
         converged += bool(out["converged"])
     assert good >= 9 and converged >= 7
+
+
+def _ten_targets(name: str, tmp_path, points: int, budget: dict | None = None) -> list[dict]:
+    """Ten targets of ``name`` (:func:`draw_target`, nodal solver above), each estimated with the defaults."""
+    from estimation.estimate import default_band
+
+    model = get_model(name)
+    lo, hi = default_band(model, next(iter(model.configurations.values())))
+    f = np.logspace(np.log10(lo), np.log10(hi), points)
+    rng = np.random.default_rng(2026)
+    rows = []
+    for i in range(10):
+        t, full = draw_target(model, rng)
+        path = tmp_path / f"{name}-{i}.csv"
+        write_responses(path, f, target_responses(model, full, f))
+        cfg = {"model": name, "target": {"kind": "responses-csv", "path": str(path)}, "seed": i + 1}
+        if budget:
+            cfg["budget"] = budget
+        out = cli.run_estimate(cfg, progress=False)
+        err = {k: abs(out["estimate"][k] - v) / abs(v) * 100 for k, v in t.items() if v != 0}
+        wrong = [k for k, e in err.items() if not e < 1.0]
+        rows.append({"wrong": wrong, "converged": out["converged"], "non_identifiable": out["non_identifiable"],
+                     "reason": out["convergence_reason"], "worst": max(err.values())})
+    return rows
+
+
+@pytest.mark.parametrize("name", ["three-section", "cascade-4"])
+def test_one_port_models_ten_independent_targets(name, tmp_path):
+    """Ten random windings per one-port model, ``Zin`` from the nodal solver above, ``estimate`` with its defaults.
+
+    Targets: every parameter of the default estimation vector log-uniform within a factor 2 of
+    the model's value and inside the default bounds (three-section: Table 4.8), couplings within
+    +-2 %. Stated accuracy: every answer is right (every parameter within 1 %) or says it is not
+    (``converged: false`` or the wrong parameters named as not identifiable); at least 9 of 10
+    are right and converged (measured: 10 of 10 for both, worst error below 1e-6 %).
+    """
+    rows = _ten_targets(name, tmp_path, points=200)
+    for i, r in enumerate(rows):
+        assert not r["wrong"] or r["converged"] is False or all(k in r["non_identifiable"] for k in r["wrong"]), (i, r)
+    assert sum(not r["wrong"] and r["converged"] for r in rows) >= 9, rows
+
+
+@pytest.mark.parametrize("name", ["hv-4section", "hv-4section-cab2a", "hv-4section-cab2b", "hv-6section",
+                                  "hv-6section-passive", "hv-6section-freqdep"])
+def test_two_winding_models_ten_targets_say_so(name, tmp_path):
+    """Ten random targets per two-winding model (33-43 parameters), six responses from the nodal solver above.
+
+    The defaults fit all six configurations of the file jointly. With a one-second budget they
+    cannot find 33-43 parameters, and the stated accuracy is the honest one: no answer claims
+    ``converged`` with a parameter more than 1 % off that the verdict does not name. (Without a
+    budget, ``benchmarks/bench_estimate_defaults.py`` measures 5-8 minutes per target on two
+    cores, still not converged: the thesis's own Case Studies needed the PSO sweep of the study.)
+    """
+    rows = _ten_targets(name, tmp_path, points=40, budget={"max_time_s": 1})
+    for i, r in enumerate(rows):
+        assert not r["wrong"] or r["converged"] is False or all(k in r["non_identifiable"] for k in r["wrong"]), (i, r)
