@@ -14,8 +14,8 @@ study, thesis Table 4.5; three-section study, Tables 4.9/4.10):
    ``30 + 10 n`` evaluations of the residuals),
    which moves the weakly sensitive resistances that the summed cost hides;
 3. ``restarts`` independent seeds (3 up to 12 parameters, 2 above), and more
-   (up to ``max_restarts``, ``2 restarts + 2``) while none has brought the
-   residual RMS down to three times the data's noise floor; the
+   (up to ``max_restarts``, ``2 restarts + 2``) while fewer than two have
+   brought the residual RMS down to three times the data's noise floor; the
    lowest own cost is kept and the others tell whether the answer is unique
    (:mod:`estimation.verdict`); when the verdict finds the best one short of
    its minimum (a Gauss-Newton step would still move a parameter), it is
@@ -158,8 +158,8 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
     for k in range(max(int(plan["restarts"]), more)):
         if time_limit_s is not None and k > 0 and time.perf_counter() - t0 > time_limit_s:
             break
-        if k >= int(plan["restarts"]) and min(e[1] for e in ends) <= floor:
-            break  # the planned restarts reached the noise floor: no more needed
+        if k >= int(plan["restarts"]) and sum(e[1] <= floor for e in ends) >= 2:
+            break  # two restarts reached the noise floor (and can tell whether the answer is unique)
         budget = plan["budget"]
         if time_limit_s is not None:
             left = max(1.0, time_limit_s - (time.perf_counter() - t0))

@@ -12,7 +12,7 @@ Every answer of ``pris-cosim estimate`` carries a verdict (:func:`verdict`):
       RMS of the data (decades for log-magnitude responses, volts for
       waveforms);
     - no parameter ends within 1e-3 (unit-cube coordinate) of a bound, unless the residual is within
-      the noise floor (the bound then limits nothing) and no coupling was repaired;
+      the noise floor, at least two restarts found the same values and no coupling was repaired;
     - the estimate is a minimum: a Gauss-Newton step from it would move no
       parameter by more than 0.1 %;
     - the restarts that reach the best cost agree on every parameter to
@@ -205,10 +205,6 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
     at_bound = [k for k, ui in zip(names, u) if ui <= AT_BOUND or ui >= 1 - AT_BOUND]
     if bool(np.any(ev.repaired)):
         at_bound += [k for k in params.couplings + params.mutuals() if k in names and k not in at_bound]
-    if at_bound and (not rms <= tol or bool(np.any(ev.repaired))):
-        # a bound limits the answer only when the fit is short of the data's noise floor (or a coupling was
-        # repaired); a value near a bound that explains the data to its noise is the answer
-        reasons.append(f"{', '.join(at_bound)} at a bound")
     # restarts: those reaching the best residual agree?
     agreeing, differing, reached = 1, set(), 1
     ends = list(ends)
@@ -223,8 +219,12 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
             bad = [k for k in names if dd[k] > AGREE]
             differing |= set(bad)
             agreeing += not bad
-        if differing:
-            reasons.append(f"restarts reach the same cost at different {', '.join(k for k in names if k in differing)}")
+    if at_bound and (not rms <= tol or bool(np.any(ev.repaired)) or agreeing < 2):
+        # a value near a bound is the answer only when it explains the data to their noise and
+        # independent restarts found it again (else an equivalent circuit may lie beyond the bound)
+        reasons.append(f"{', '.join(at_bound)} at a bound")
+    if differing:
+        reasons.append(f"restarts reach the same cost at different {', '.join(k for k in names if k in differing)}")
     dof = max(1, r.size - len(names))
     s_res = rms * math.sqrt(r.size / dof) if math.isfinite(rms) else math.inf
     sigma = max(s_res if math.isfinite(s_res) else 0.0, noise, 1e-12 * max(scale, 1e-300))
