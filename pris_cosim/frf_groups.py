@@ -60,6 +60,26 @@ class _Group:
     incidence: dict[str, np.ndarray] = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class NodalSolution:
+    """The nodal solve of :meth:`GroupedResponseSet.nodal` at one parameter set.
+
+    Attributes
+    ----------
+    frequency_hz : numpy.ndarray
+        ``(F,)``, Hz.
+    responses : dict
+        Response name to complex ``(F,)``.
+    states : list of tuple
+        Per group: node voltages ``(F, N, outputs)`` (V/A), inductor currents ``(F, m, outputs)``
+        (A/A) for a unit current into each output node, transfer impedances ``(outputs, inputs, F)``.
+    """
+
+    frequency_hz: np.ndarray
+    responses: dict[str, np.ndarray]
+    states: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
 class GroupedResponseSet:
     """The responses of several configurations of one circuit, one network per distinct set of shorts.
 
@@ -190,10 +210,60 @@ class GroupedResponseSet:
             z[bad] = g.mna.solve_dense(sub, s, g.out_index)
         return z
 
-    # ------------------------------------------------------------------ derivatives
+    # ------------------------------------------------------------------ nodal solve and derivatives
+    def nodal(self, frequency_hz: Sequence[float] | np.ndarray, base: Mapping[str, Numeric]) -> NodalSolution:
+        """Responses at one parameter set by the nodal solve, kept for :meth:`sensitivities`.
+
+        With the inductor currents eliminated, ``(G + s C_n + A_L L^{-1} A_L^T / s) v = e_k``
+        for every port ``k`` and response node (the adjoint right-hand sides); the inductor
+        currents are ``i = L^{-1} A_L^T v / s``.
+
+        Parameters
+        ----------
+        frequency_hz : array_like, Hz
+            ``(F,)`` positive frequencies.
+        base : mapping
+            Overrides (scalars).
+
+        Returns
+        -------
+        NodalSolution
+        """
+        f = np.asarray(frequency_hz, dtype=float)
+        s = 2j * np.pi * f
+        values = self.circuit.resolve(base, check=False)
+        g0 = {e.key: 1.0 / _real(values[e.key]) for e in self.circuit.of_kind("R")}
+        c0 = {e.key: _real(values[e.key]) for e in self.circuit.of_kind("C")}
+        L0 = self.circuit.inductance_matrix({k: _real(values[k]) for k in self._magnetic()})
+        order = [e.key for e in self.circuit.inductors()]
+        states, resp = [], {}
+        for g in self.groups:
+            if [e.key for e in g.mna.inductors] != order:  # pragma: no cover - shorting keeps the element order
+                raise CircuitError("grouped responses: inductor order differs between the networks")
+            mna = g.mna
+            AR, AC = self._incidence(g, "R", mna.resistors), self._incidence(g, "C", mna.capacitors)
+            gv = np.array([g0[e.key] for e in mna.resistors], float).reshape(-1)
+            cv = np.array([c0[e.key] for e in mna.capacitors], float).reshape(-1)
+            N = AR.shape[0]
+            if mna.AL.shape[1]:
+                B = np.linalg.solve(L0, mna.AL.T)  # L^-1 A_L^T, (m, N)
+                gamma = mna.AL @ B
+            else:
+                B, gamma = np.zeros((0, N)), np.zeros((N, N))
+            Y = ((AR * gv) @ AR.T)[None] + s[:, None, None] * ((AC * cv) @ AC.T)[None] + gamma[None] / s[:, None, None]
+            E = np.zeros((N, len(g.out_index)))
+            E[g.out_index, np.arange(len(g.out_index))] = 1.0
+            X = np.linalg.solve(Y, np.broadcast_to(E, (f.size, N, E.shape[1])))  # (F, N, outputs)
+            XI = (B @ X) / s[:, None, None]  # inductor currents, (F, m, outputs)
+            inputs = [g.outputs.index(p) for p in g.ports]
+            z = np.moveaxis(X[:, g.out_index][:, :, inputs], 0, -1)  # (outputs, inputs, F)
+            states.append((X, XI, z))
+            resp.update({k: v[0] for k, v in self._combine(g, z[None]).items()})
+        return NodalSolution(f, {r: resp[r] for r in self.names}, states)
+
     def sensitivities(self, frequency_hz: Sequence[float] | np.ndarray, base: Mapping[str, Numeric],
-                      upper: Mapping[str, Numeric], steps: np.ndarray, lower: Mapping[str, Numeric] | None = None
-                      ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+                      upper: Mapping[str, Numeric], steps: np.ndarray, lower: Mapping[str, Numeric] | None = None,
+                      solution: NodalSolution | None = None) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """Responses at one parameter set and their derivatives along ``n`` directions (adjoint nodal solve).
 
         The element values are differenced between ``upper`` and ``lower`` (``base`` when omitted):
@@ -215,6 +285,8 @@ class GroupedResponseSet:
             directions, nonzero).
         lower : mapping, optional
             Overrides of the ``n`` points the differences start from (default: ``base``).
+        solution : NodalSolution, optional
+            :meth:`nodal` at ``base`` on the same frequencies, when already computed.
 
         Returns
         -------
@@ -225,39 +297,26 @@ class GroupedResponseSet:
             direction unit).
         """
         f = np.asarray(frequency_hz, dtype=float)
+        if solution is None or solution.frequency_hz.shape != f.shape or np.any(solution.frequency_hz != f):
+            solution = self.nodal(f, base)
         s = 2j * np.pi * f
         h = np.asarray(steps, float)
         n = h.size
-        v0 = self.circuit.resolve(base, check=False)
         v1 = self.circuit.resolve(upper, check=False)
-        vm = v0 if lower is None else self.circuit.resolve(lower, check=False)
+        vm = self.circuit.resolve(base if lower is None else lower, check=False)
 
-        def real(v: Numeric) -> np.ndarray:
-            return np.real(np.asarray(v, float))
+        def derivatives(kind: str, transform) -> dict[str, np.ndarray]:
+            return {e.key: (transform(np.broadcast_to(_real(v1[e.key]), (n,)))
+                            - transform(np.broadcast_to(_real(vm[e.key]), (n,)))) / h for e in self.circuit.of_kind(kind)}
 
-        def element_derivatives(kind: str, transform) -> tuple[dict[str, float], dict[str, np.ndarray]]:
-            x0, dx = {}, {}
-            for e in self.circuit.of_kind(kind):
-                a = transform(np.broadcast_to(real(vm[e.key]), (n,)))
-                b = transform(np.broadcast_to(real(v1[e.key]), (n,)))
-                x0[e.key], dx[e.key] = float(transform(real(v0[e.key]))), (b - a) / h
-            return x0, dx
-
-        g0, dg = element_derivatives("R", lambda r: 1.0 / r)
-        c0, dc = element_derivatives("C", lambda c: c)
-        magnetic = [e.key for e in self.circuit.inductors()] + [k.key for k in self.circuit.of_kind("K")]
-        L0 = self.circuit.inductance_matrix({k: real(v0[k]) for k in magnetic})
-        L1 = self.circuit.inductance_matrix({k: np.broadcast_to(real(v1[k]), (n,)) for k in magnetic})
-        Lm = self.circuit.inductance_matrix({k: np.broadcast_to(real(vm[k]), (n,)) for k in magnetic})
-        dL = (L1 - Lm) / h[:, None, None]
-        order = [e.key for e in self.circuit.inductors()]
-        resp: dict[str, np.ndarray] = {}
+        dg = derivatives("R", lambda r: 1.0 / r)
+        dc = derivatives("C", lambda c: c)
+        magnetic = self._magnetic()
+        dL = (self.circuit.inductance_matrix({k: np.broadcast_to(_real(v1[k]), (n,)) for k in magnetic})
+              - self.circuit.inductance_matrix({k: np.broadcast_to(_real(vm[k]), (n,)) for k in magnetic})) / h[:, None, None]
         jac: dict[str, np.ndarray] = {}
-        for g in self.groups:
-            if [e.key for e in g.mna.inductors] != order:  # pragma: no cover - shorting keeps the element order
-                raise CircuitError("grouped responses: inductor order differs between the networks")
-            z, dz = self._adjoint(g, (g0, dg), (c0, dc), (L0, dL), s)
-            resp.update({k: v[0] for k, v in self._combine(g, z[None]).items()})
+        for g, (X, XI, z) in zip(self.groups, solution.states):
+            dz = self._adjoint(g, X, XI, dg, dc, dL, s)
             pos = {nd: i for i, nd in enumerate(g.outputs)}
             for c in g.configurations:
                 j = g.ports.index(g.circuit.require_node(c.port))
@@ -275,7 +334,10 @@ class GroupedResponseSet:
                             dnum = dnum + sign * dz[pos[node], j]
                     with np.errstate(divide="ignore", invalid="ignore"):
                         jac[r.name] = ((dnum - (num / zin)[None] * dzin) / zin[None]).T
-        return {r: resp[r] for r in self.names}, {r: jac[r] for r in self.names}
+        return dict(solution.responses), {r: jac[r] for r in self.names}
+
+    def _magnetic(self) -> list[str]:
+        return [e.key for e in self.circuit.inductors()] + [k.key for k in self.circuit.of_kind("K")]
 
     @staticmethod
     def _incidence(g: _Group, kind: str, elements: Sequence) -> np.ndarray:
@@ -292,43 +354,35 @@ class GroupedResponseSet:
         g.incidence[kind] = a
         return a
 
-    def _adjoint(self, g: _Group, cond: tuple[dict, dict], cap: tuple[dict, dict], ind: tuple[np.ndarray, np.ndarray],
-                 s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Transfer impedances ``(outputs, inputs, F)`` and their derivatives ``(outputs, inputs, n, F)``.
+    def _adjoint(self, g: _Group, X: np.ndarray, XI: np.ndarray, dg: Mapping[str, np.ndarray],
+                 dc: Mapping[str, np.ndarray], dL: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Derivatives ``(outputs, inputs, n, F)`` of the transfer impedances: ``-x_o^T dM x_k``.
 
-        ``cond``, ``cap``: element key to value (S, F) and to its ``(n,)`` derivatives; ``ind``: the
-        inductance matrix (H) and its ``(n, m, m)`` derivatives.
+        ``X``, ``XI``: node voltages ``(F, N, outputs)`` and inductor currents ``(F, m, outputs)``
+        for unit currents into the output nodes; ``dg``, ``dc``: element key to the ``(n,)``
+        derivatives of its conductance (S) or capacitance (F); ``dL``: ``(n, m, m)``, H.
         """
         mna = g.mna
         AR, AC = self._incidence(g, "R", mna.resistors), self._incidence(g, "C", mna.capacitors)
-        gv = np.array([cond[0][e.key] for e in mna.resistors]).reshape(-1)
-        cv = np.array([cap[0][e.key] for e in mna.capacitors]).reshape(-1)
-        dg = np.array([cond[1][e.key] for e in mna.resistors]).reshape(len(gv), -1)  # (nR, n)
-        dc = np.array([cap[1][e.key] for e in mna.capacitors]).reshape(len(cv), -1)
-        L0, dL = ind
-        N, m = AR.shape[0], L0.shape[0]
-        K, F, n = N + m, s.size, dL.shape[0]
-        M = np.zeros((F, K, K), complex)
-        M[:, :N, :N] = (AR * gv) @ AR.T + s[:, None, None] * ((AC * cv) @ AC.T)
-        M[:, :N, N:] = mna.AL
-        M[:, N:, :N] = mna.AL.T
-        M[:, N:, N:] = -s[:, None, None] * L0
-        E = np.zeros((K, len(g.out_index)))
-        E[g.out_index, np.arange(len(g.out_index))] = 1.0
-        X = np.linalg.solve(M, np.broadcast_to(E, (F, K, E.shape[1])))  # (F, K, outputs)
+        n, m = dL.shape[0], dL.shape[1]
+        DG = np.array([dg[e.key] for e in mna.resistors]).reshape(-1, n)  # (nR, n)
+        DC = np.array([dc[e.key] for e in mna.capacitors]).reshape(-1, n)
+        F, no = X.shape[0], X.shape[2]
         inputs = [g.outputs.index(p) for p in g.ports]
-        z = np.moveaxis(X[:, g.out_index][:, :, inputs], 0, -1)  # (outputs, inputs, F)
-        no, ni = X.shape[2], len(inputs)
-        # x_o^T dM_p x_j: per element, (a_e^T x_o)(a_e^T x_j) times its derivatives; L as a full matrix
-        pr, pc = AR.T @ X[:, :N], AC.T @ X[:, :N]  # (F, elements, outputs)
-        xi = X[:, N:]
+        ni = len(inputs)
+        # per element (a_e^T x_o)(a_e^T x_k) times its derivatives; L as a full matrix
+        pr, pc = AR.T @ X, AC.T @ X  # (F, elements, outputs)
         rows = F * no * ni
-        t_r = (pr[:, :, :, None] * pr[:, :, None, inputs]).transpose(0, 2, 3, 1).reshape(rows, -1) @ dg
-        t_c = (pc[:, :, :, None] * pc[:, :, None, inputs]).transpose(0, 2, 3, 1).reshape(rows, -1) @ dc
-        t_l = np.einsum("fao,fbj->fojab", xi, xi[:, :, inputs]).reshape(rows, m * m) @ dL.reshape(n, m * m).T
+        t_r = (pr[:, :, :, None] * pr[:, :, None, inputs]).transpose(0, 2, 3, 1).reshape(rows, -1) @ DG
+        t_c = (pc[:, :, :, None] * pc[:, :, None, inputs]).transpose(0, 2, 3, 1).reshape(rows, -1) @ DC
+        t_l = np.einsum("fao,fbj->fojab", XI, XI[:, :, inputs]).reshape(rows, m * m) @ dL.reshape(n, m * m).T
         sv = np.repeat(s, no * ni)[:, None]
         dz = -(t_r + sv * (t_c - t_l))
-        return z, np.moveaxis(dz.reshape(F, no, ni, n), 0, -1)
+        return np.moveaxis(dz.reshape(F, no, ni, n), 0, -1)
 
 
-__all__ = ["GroupedResponseSet"]
+def _real(v: Numeric) -> np.ndarray:
+    return np.real(np.asarray(v, float))
+
+
+__all__ = ["GroupedResponseSet", "NodalSolution"]
