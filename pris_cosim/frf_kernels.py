@@ -161,7 +161,8 @@ def _hessenberg_loop(H, bt, Ct, direct, omega, out):  # pragma: no cover - compi
                 out[p, o, i] = complex(accr, acci)
 
 
-def pole_residue_sum(poles: np.ndarray, residues: np.ndarray, direct: np.ndarray, omega: np.ndarray) -> np.ndarray:
+def pole_residue_sum(poles: np.ndarray, residues: np.ndarray, direct: np.ndarray, omega: np.ndarray,
+                     compiled: bool | None = None) -> np.ndarray:
     """``sum_k r_k / (j w - p_k) + d`` of real systems, conjugate pairs in real arithmetic.
 
     Parameters
@@ -175,6 +176,10 @@ def pole_residue_sum(poles: np.ndarray, residues: np.ndarray, direct: np.ndarray
         ``(P, ny)`` real feed-through.
     omega : numpy.ndarray
         ``(F,)`` angular frequencies, rad/s.
+    compiled : bool, optional
+        Use the compiled loop (when numba is installed) regardless of the batch size
+        (``True``), never (``False``), or above :data:`COMPILED_MIN_WORK` (default).
+        Callers that evaluate many batches repay the one-off compilation at any size.
 
     Returns
     -------
@@ -187,7 +192,8 @@ def pole_residue_sum(poles: np.ndarray, residues: np.ndarray, direct: np.ndarray
     residues = np.broadcast_to(residues, (P, ny, n))
     direct = np.broadcast_to(direct, (P, ny))
     omega = np.ascontiguousarray(omega, float)
-    kern = _jit("pairs") if P * n * omega.size >= COMPILED_MIN_WORK else None
+    big = P * n * omega.size >= COMPILED_MIN_WORK if compiled is None else bool(compiled)
+    kern = _jit("pairs") if big else None
     if kern is not None:
         out = np.zeros((P, ny, omega.size), complex)
         with warnings.catch_warnings():  # numba's cache notices (e.g. a read-only install) are not the user's business
