@@ -94,11 +94,32 @@ class ShortedLoop:
         Loop resistance referred to the section's turns, Ohm (fault
         resistance plus the loop's own; a loop of ``a`` times the section's
         turns with resistance ``R`` refers to ``R / a**2``).
+    position : float, optional
+        Where the loop sits along the winding, in sections from the port-1
+        end (``section <= position <= section + 1``); its mutual to section
+        ``j`` is then ``c sqrt(L_k L_j) rho**|position - (j + 0.5)|``.
+        ``None``: the section's centre (mutuals ``c M_kj``).
     """
 
     section: int
     coupling: float
     resistance: float
+    position: float | None = None
+
+    def mutuals(self, model: "WindingModel") -> np.ndarray:
+        """Mutual inductances of the loop to every section, H (before the core factor), shape ``(N,)``."""
+        M = model.mutual()
+        if self.position is None:
+            return self.coupling * M[self.section]
+        L = np.asarray(model.L, dtype=float)
+        centres = np.arange(L.size) + 0.5
+        m = self.coupling * np.sqrt(L[self.section] * L) * model.rho ** np.abs(self.position - centres)
+        if model.coupling_scale is not None:
+            g = np.asarray(model.coupling_scale, dtype=float)
+            m = m * g[self.section] * g
+            m[self.section] = self.coupling * M[self.section, self.section] * model.rho ** abs(
+                self.position - centres[self.section])
+        return m
 
 
 @dataclass
@@ -194,7 +215,7 @@ def admittance(model: WindingModel, f: np.ndarray) -> np.ndarray:
     zb[:, idx, idx] += model.r_dc * L / L.sum()
     for lp in model.loops:
         k = lp.section
-        m = lp.coupling * M[k]  # loop mutuals (H, before the core factor)
+        m = lp.mutuals(model)  # loop mutuals (H, before the core factor)
         zl = lp.resistance + jw * mu * M[k, k]
         zb -= ((jw * mu) ** 2 / zl)[:, None, None] * np.outer(m, m)[None, :, :]
     yb = np.linalg.inv(zb)
