@@ -24,9 +24,11 @@ Causes (each tried at every section ``k``; the location is the best ``k``):
     A factor on the mutual couplings of section ``k`` with all the others.
     One parameter.
 
-Every fit starts from several points (the others are retries should one end
-in a failed fit); a fit that ends above the baseline cost (the reference
-model against the new sweep) has failed and is never a candidate.  The cause with the lowest BIC is named when it beats the
+A short is fitted from three starts at every section (bolted, intermediate
+and resistive loop resistances), the other causes from one, with further
+starts only as retries of a failed fit; a fit that ends above the baseline
+cost (the reference model against the new sweep) has failed and is never a
+candidate.  The cause with the lowest BIC is named when it beats the
 baseline by :data:`MIN_DELTA_BIC` and removes at least :data:`MIN_GAIN` of
 its cost (the gain); otherwise the answer is ``none``.
 
@@ -279,6 +281,10 @@ def drift_sigma(base: WindingModel, y_ref: np.ndarray, y_new: np.ndarray, sigma:
 
 _FACTORIES = {"shorted-turns": _shorted, "radial-deformation": _radial, "axial-displacement": _axial}
 
+#: Starts always fitted per section (the bolted, intermediate and resistive regimes of a short); the
+#: further starts of a cause, and every start after the first of the others, only retry a failed fit.
+_ALL_STARTS = {"shorted-turns": 3, "radial-deformation": 1, "axial-displacement": 1}
+
 
 def _log(msg: str, progress: bool) -> None:
     if progress:
@@ -346,12 +352,14 @@ def _diagnose(fp: Fingerprint, reference: Sweep, measured: Sweep, progress: bool
         for k in range(base.n):
             build, starts, bounds, describe = _FACTORIES[cause](base, k)
             fits = []
-            for s in starts:
+            for i, s in enumerate(starts):
+                if i >= _ALL_STARTS.get(cause, len(starts)) and min(c for c, _ in fits) < c0:
+                    break  # the remaining starts are retries of a failed fit
                 x0 = np.clip(np.asarray(s, dtype=float), np.asarray(bounds[0]) + 1e-9, np.asarray(bounds[1]) - 1e-9)
                 with np.errstate(all="ignore"):
                     sol = least_squares(lambda p: residuals(build(p)), x0, bounds=bounds, max_nfev=max_nfev)
                 cost = float(np.sum(sol.fun**2))
-                fits.append((cost, sol.x))
+                fits.append((cost if np.isfinite(cost) else np.inf, sol.x))
             cost, x = min(fits, key=lambda t: t[0])
             rows.append(cost)
             if not (np.isfinite(cost) and cost < c0):
