@@ -9,14 +9,15 @@ so the reference model's own misfit cancels, and a sweep that differs from
 the fingerprint only by noise leaves nothing to explain.  ``sigma`` combines
 the noise estimated from both sweeps with a model-error floor.
 
-Causes (each tried at every section ``k``; the location is the best ``k``):
+Causes (each tried at every section ``k``; the location is the best fit's):
 
 ``shorted-turns``
-    A closed loop coupled to section ``k`` (:class:`~estimation.sfra.winding.ShortedLoop`):
-    coupling ``c`` to its section (mutuals ``c M_kj`` to the others, so its
-    reach along the winding follows the fitted inter-section coupling) and a
-    loop resistance referred to the section's turns (bolted: small; through
-    10 Ohm: large).  Two parameters.
+    A closed loop in section ``k`` (:class:`~estimation.sfra.winding.ShortedLoop`):
+    its position ``k - 1 <= p <= k`` along the winding (in sections), its
+    coupling ``c`` (mutuals ``c sqrt(L_k L_j) rho**|p - j + 0.5|`` to
+    section ``j``, so its reach along the winding follows the fitted
+    inter-section coupling) and a loop resistance referred to the section's
+    turns (bolted: small; through 10 Ohm: large).  Three parameters.
 ``radial-deformation``
     Factors on the series capacitance of section ``k`` and on the ground
     capacitances of its two nodes.  Two parameters.
@@ -37,9 +38,11 @@ model floor: the drift of the set-up between sweeps.  The port shunts of the
 reference model (the fixture and calibration residual seen in ``Y11 + Y21``
 and ``Y22 + Y21``; on the shared data about 3.6e-5 S at port 2, where the
 measured ``|S22|`` exceeds 1) are not stable: over the 17 shared sweeps,
-taken one after another in 86 minutes, the port-2 shunt drifts steadily with
-the time stamp by -25 % to +13 % of its value, and the port-1 shunt
-likewise.  A drift ``d`` of a shunt ``y_p`` moves the driving-point
+taken one after another in 86 minutes, the port-2 shunt moves steadily with
+the time stamp, from about 20 % below the reference's value in the first
+sweep to 14 % above in the last, and the port-1 shunt likewise.  The
+sweeps were taken in tap order, so this drift runs with the tap too: it
+must not be what places a short.  A drift ``d`` of a shunt ``y_p`` moves the driving-point
 admittance ``Y_pp`` by ``d y_p``, so ``ln Y_pp`` is uncertain by
 ``d |y_p| / |Y_pp|`` in each sweep (:data:`SHUNT_DRIFT` is ``d``).  This
 term is small where the winding's own admittance dominates and large where
