@@ -2,7 +2,9 @@
 
 Prints per sweep: cause, located section and fraction of the winding from
 the port-1 end, kind (bolted or resistive, from the fitted loop resistance),
-gain, wall time; the reference-fit time; the Spearman rank correlation of the
+gain, the side margin (how much higher the weighted cost of the best fit on
+the other half of the winding is, in the units of the BIC), wall time; the
+reference-fit time; the Spearman rank correlation of the
 located position against the tap position, per kind; and a summary (causes
 named, kinds right, slowest sweep).  The tap positions come from the data's
 README and are used here only to score the result.
@@ -60,11 +62,17 @@ def main() -> int:
             sev = diag.severity() or {}
             frac = loc["fraction"] if loc else float("nan")
             named += diag.cause == "shorted-turns"
+            gains = np.asarray(diag.by_section.get(diag.cause, []), dtype=float)
+            margin = float("nan")
+            if loc and gains.size:
+                centres = (np.arange(gains.size) + 0.5) / gains.size
+                other = centres > 0.5 if loc["fraction"] < 0.5 else centres < 0.5
+                margin = diag.baseline_cost * (gains[loc["section"] - 1] - gains[other].max())
             kinds += sev.get("kind") == kind
             print(f"{kind:<9} {p.name:<14} taps {tap:>2}-{tap + 2:<2}: {diag.cause:<14} section "
                   f"{loc['section'] if loc else '-':>2}/{fp.n_sections} location {frac:.3f}  "
                   f"{sev.get('kind', '-'):<9} R {sev.get('fault_resistance_ohm') or float('nan'):8.3g} Ohm  "
-                  f"gain {diag.gain:.3f}  {wall:.1f} s", flush=True)
+                  f"gain {diag.gain:.3f}  side margin {margin:7.0f}  {wall:.1f} s", flush=True)
             taps.append(tap)
             locs.append(frac)
         ok = np.isfinite(locs)
