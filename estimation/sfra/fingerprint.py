@@ -7,8 +7,9 @@ winding of uniform construction is what the section index has to mean for a
 fault's location: in a model whose sections were fitted freely (tried
 before) the per-section inductances spread over a factor of 25 and a
 section's index said nothing about where along the winding it lies.  A
-linear grading of the section parameters was tried as well; its fit came
-back to equal sections.  The uniform model fits the shared reference with a
+linear grading of the section parameters was tried as well: at ``N = 8`` it
+came back to equal sections, at ``N = 6`` it ran to a grading of 150 to 1
+in inductance.  The uniform model fits the shared reference with a
 weighted rms about twice that of the free one, which the fault fits do not
 see (they fit changes; see :mod:`estimation.sfra.faults`).
 
