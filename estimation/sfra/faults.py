@@ -7,7 +7,8 @@ the *change*: the residual at each frequency and response is
 
 so the reference model's own misfit cancels, and a sweep that differs from
 the fingerprint only by noise leaves nothing to explain.  ``sigma`` combines
-the noise estimated from both sweeps with a model-error floor.
+the noise estimated from both sweeps with a model-error floor and the drift
+of the set-up (below).
 
 Causes (each tried at every section ``k``; the location is the best fit's):
 
@@ -42,9 +43,11 @@ taken one after another in 86 minutes, the port-2 shunt moves steadily with
 the time stamp, from about 20 % below the reference's value in the first
 sweep to 14 % above in the last, and the port-1 shunt likewise.  The
 sweeps were taken in tap order, so this drift runs with the tap too: it
-must not be what places a short.  A drift ``d`` of a shunt ``y_p`` moves the driving-point
-admittance ``Y_pp`` by ``d y_p``, so ``ln Y_pp`` is uncertain by
-``d |y_p| / |Y_pp|`` in each sweep (:data:`SHUNT_DRIFT` is ``d``).  This
+must not be what places a short.  A drift ``d`` of a shunt ``y_p`` moves
+the driving-point admittance ``Y_pp`` by ``d y_p``, so ``ln Y_pp`` is
+uncertain by ``d |y_p| / |Y_pp|`` in each sweep (:data:`SHUNT_DRIFT` is
+``d``, the observed scale of the drift; it was set from the drift, not
+tuned on the location).  This
 term is small where the winding's own admittance dominates and large where
 ``Y_pp`` is small, above all in the deep notches of ``Y22`` between 10 and
 30 kHz, where the winding's admittance and the port-2 shunt nearly cancel
