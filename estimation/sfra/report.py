@@ -77,9 +77,13 @@ def _winding_figure(diag: SfraDiagnosis, path: Path) -> None:
         if gains and k - 1 < len(gains):
             text += f"  gain {gains[k - 1]:.2f}"
         ax.text(0.9, y + 0.5, text, va="center", fontsize=8)
+    if loc is not None:
+        y = n * (1.0 - loc["fraction"])  # the fitted position along the winding
+        ax.plot([0.1, 0.9], [y, y], color="k", lw=2)
+        ax.text(0.05, y, f"{loc['fraction']:.2f}", ha="right", va="center", fontsize=7)
     ax.text(0.5, n + 0.15, "port 1", ha="center", va="bottom", fontsize=9)
     ax.text(0.5, -0.15, "port 2", ha="center", va="top", fontsize=9)
-    ax.set_xlim(0, 2.2)
+    ax.set_xlim(-0.3, 2.2)
     ax.set_ylim(-0.8, n + 0.8)
     ax.axis("off")
     ax.set_title(diag.cause if hit is None else f"{diag.cause}: section {hit}/{n}", fontsize=9)

@@ -12,10 +12,13 @@ The winding is a cascade of ``N`` sections between node 0 (port 1) and node
 every node ``j`` has a ground capacitance ``Cg_j`` (F) to the core, and each
 port node a constant complex shunt admittance ``g + j b`` (S): the residual
 of the fixture and calibration seen in the measured ``Y11 + Y21`` and
-``Y22 + Y21`` below 10 kHz (on the shared reference about 3.5e-5 S at -115
-degrees on port 2, which no passive element gives; it is an artefact of the
-set-up, fitted so that it does not distort the winding parameters; a
-leakage spread along the winding was tried and fitted the reference worse).
+``Y22 + Y21`` below 10 kHz (on the shared reference about 3.6e-5 S at -115
+degrees on port 2, which no passive element gives: the measured ``|S22|``
+is 1.0015 there, a reflection-tracking error of the calibration; it is
+fitted so that it does not distort the winding parameters, and it drifts
+between sweeps, which :mod:`estimation.sfra.faults` weighs; a leakage
+spread along the winding was tried and fitted the reference worse).  The
+reference fit (:mod:`estimation.sfra.fingerprint`) makes the sections equal.
 
 Iron-core loss.  The laminated core makes the inductance and its loss
 frequency dependent (eddy currents).  All core inductances are multiplied by
@@ -39,8 +42,9 @@ per-section shunt loss resistance was not used: it damps but does not make
 the inductance fall with frequency.  Capacitances carry a dielectric loss angle ``tan_c``.
 
 A shorted loop (the fault of :mod:`estimation.sfra.faults`) is an extra
-closed branch coupled to the sections; it is eliminated exactly (Schur
-complement), so the nodal network keeps ``N + 1`` nodes.
+closed branch coupled to the sections, at a continuous position along the
+winding; it is eliminated exactly (Schur complement), so the nodal network
+keeps ``N + 1`` nodes.
 """
 
 from __future__ import annotations
@@ -94,11 +98,32 @@ class ShortedLoop:
         Loop resistance referred to the section's turns, Ohm (fault
         resistance plus the loop's own; a loop of ``a`` times the section's
         turns with resistance ``R`` refers to ``R / a**2``).
+    position : float, optional
+        Where the loop sits along the winding, in sections from the port-1
+        end (``section <= position <= section + 1``); its mutual to section
+        ``j`` is then ``c sqrt(L_k L_j) rho**|position - (j + 0.5)|``.
+        ``None``: the section's centre (mutuals ``c M_kj``).
     """
 
     section: int
     coupling: float
     resistance: float
+    position: float | None = None
+
+    def mutuals(self, model: "WindingModel") -> np.ndarray:
+        """Mutual inductances of the loop to every section, H (before the core factor), shape ``(N,)``."""
+        M = model.mutual()
+        if self.position is None:
+            return self.coupling * M[self.section]
+        L = np.asarray(model.L, dtype=float)
+        centres = np.arange(L.size) + 0.5
+        m = self.coupling * np.sqrt(L[self.section] * L) * model.rho ** np.abs(self.position - centres)
+        if model.coupling_scale is not None:
+            g = np.asarray(model.coupling_scale, dtype=float)
+            m = m * g[self.section] * g
+            m[self.section] = self.coupling * M[self.section, self.section] * model.rho ** abs(
+                self.position - centres[self.section])
+        return m
 
 
 @dataclass
@@ -194,7 +219,7 @@ def admittance(model: WindingModel, f: np.ndarray) -> np.ndarray:
     zb[:, idx, idx] += model.r_dc * L / L.sum()
     for lp in model.loops:
         k = lp.section
-        m = lp.coupling * M[k]  # loop mutuals (H, before the core factor)
+        m = lp.mutuals(model)  # loop mutuals (H, before the core factor)
         zl = lp.resistance + jw * mu * M[k, k]
         zb -= ((jw * mu) ** 2 / zl)[:, None, None] * np.outer(m, m)[None, :, :]
     yb = np.linalg.inv(zb)
