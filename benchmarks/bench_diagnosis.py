@@ -157,8 +157,12 @@ def main() -> None:
     ap.add_argument("--executor", default="processes")
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--no-speed", action="store_true", help="skip the timed single diagnoses")
+    ap.add_argument("--only", nargs="+", default=None, metavar="TEXT",
+                    help="run only the cases whose id contains one of these texts (e.g. missing-section none)")
     args = ap.parse_args()
     todo = cases(args.quick)
+    if args.only:
+        todo = [c for c in todo if any(t in _task_id(c) for t in args.only)]
     tasks = [Task(_task_id(c), run_case, c, label=_task_id(c)) for c in todo]
     t0 = time.perf_counter()
     results = run_tasks(tasks, executor=args.executor, store=ResultsStore(args.out), progress=True,

@@ -43,13 +43,17 @@ from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
 
 from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
 from .evidence import band_table, localise, noise_floor, resonance_comparison, unexplained_bands
+from .holdout import held_out_gain
 from .fit import DiagnosisError, FitResult, FrequencyFit, configuration_ports, group_names, significant
 from .realise import realise_extended
 from .sections import section_candidates
+from .unmerge import missing_modes, search_unmerged
 
 MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
 #: Selection stops once the cost is within this factor of the noise floor.
 NOISE_MARGIN = 1.25
+#: Causes that add circuit elements: named only if they also pass the held-out check (:mod:`.holdout`).
+STRUCTURAL = ("missing-section",)
 
 
 @dataclass
@@ -141,6 +145,7 @@ class _Context:
     scale: float
     one_port: bool
     progress: bool
+    nominal: Circuit | None = None
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = ()) -> FrequencyFit:
         return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
@@ -245,7 +250,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         )
     configs = list(model.configurations.values())
     one_port = len(configs) == 1 and all(r.node is None for r in configs[0].responses)
-    ctx = _Context(f, data, configs, fixed, impedance_scale, one_port, progress)
+    ctx = _Context(f, data, configs, fixed, impedance_scale, one_port, progress,
+                   nominal=model.circuit if model.family != ("lumped",) else None)
     floor = noise_floor(f, data)
     _log(f"noise floor {floor['cost']:.3g} (noise RMS "
          + ", ".join(f"{k} {100 * v:.2g} %" for k, v in floor["per_response"].items()) + ")", progress)
@@ -285,6 +291,15 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         if not significant(current.bic, current.cost, best.bic, best.cost, min_delta_bic, need):
             break
         new_cause = next(c for c in best.causes if c not in chosen)
+        if new_cause in STRUCTURAL:
+            held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale)
+            if held < need:
+                _log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
+                     "only)", progress)
+                failed.append({"cause": new_cause, "cost": best.cost,
+                               "reason": f"held-out gain {held:.3f} below {need} (alternate points)"})
+                pool.pop(new_cause)
+                continue
         steps.append({"cause": new_cause, "gain": 1 - best.cost / current.cost, "delta_bic": current.bic - best.bic,
                       "cost": best.cost, "total_gain": 1 - best.cost / baseline.cost,
                       "model": best.structure + ("; " if best.structure and best.effects else "")
@@ -410,6 +425,13 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.cause = "+".join(res.causes)
         if best is None or res.cost < best.cost:
             best = res
+    if ctx.nominal is not None and missing_modes(ctx.f, ctx.data, base.predicted) > 0:
+        found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
+        if found is not None and (best is None or found[0].cost < best.cost):
+            best, cand = found
+            best.structure = cand.how
+            best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
+            best.cause = "+".join(best.causes)
     return best
 
 
