@@ -59,7 +59,12 @@ def run_case(kind: str, causes: list[str], seed: int, noise: float = 0.003, grou
         t = time.perf_counter()
         d = diagnose_frequency(case.frequency_hz, case.measured, model=get_model(case.baseline_model), progress=False)
     wall = time.perf_counter() - t
-    return {"kind": kind, "true": case.label, "named": "+".join(sorted(d.causes)) or "none",
+    section = None
+    if "missing-section" in causes:  # can the baseline's structure reproduce the truth within the noise at all?
+        from detectability import best_baseline_fit
+
+        section = best_baseline_fit(case)
+    return {"section_fit": section, "kind": kind, "true": case.label, "named": "+".join(sorted(d.causes)) or "none",
             "order": d.causes, "gain": d.gain, "wall_s": wall, "noise": noise, "truth": case.truth,
             "steps": d.steps, "groups": [e.group for e in (d.best.effects if d.best else [])],
             "candidates": {c["cause"]: round(c["gain"], 4) for c in d.candidates()}}

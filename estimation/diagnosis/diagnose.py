@@ -292,6 +292,12 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             break
         new_cause = next(c for c in best.causes if c not in chosen)
         if new_cause in STRUCTURAL:
+            if getattr(best, "merged_back", None) and not missing_modes(f, data, current.predicted):
+                _log(f"{new_cause}: the model without it has every measured resonance: refused", progress)
+                failed.append({"cause": new_cause, "cost": best.cost,
+                               "reason": "no measured resonance missing from the model without it"})
+                pool.pop(new_cause)
+                continue
             held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale)
             if held < need:
                 _log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
@@ -428,20 +434,32 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     if ctx.nominal is not None and missing_modes(ctx.f, ctx.data, base.predicted) > 0:
         found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
         if found is not None and (best is None or found[0].cost < best.cost):
-            best, cand = found
-            best.structure = cand.how
+            best, um = found
+            best.structure = um.candidate.how
+            best.merged_back = {**best.values, **um.merged_back(best.fitted_circuit())}
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
     return best
 
 
 def _polish_baseline(ctx: _Context, baseline: FitResult, fits, progress: bool) -> FitResult:
-    """Refit the baseline from each candidate's circuit values (same structure); keep the best baseline."""
+    """Refit the baseline from each candidate's circuit values; keep the best baseline.
+
+    Candidates of the same structure give their values; a section split from
+    the nominal circuit (:mod:`.unmerge`) gives its values with the two
+    sections merged back, so a split that only helped the fit out of a poor
+    optimum of the baseline gains nothing.
+    """
     best = baseline
+    free = {n.lower() for n in baseline.values}
     for r in sorted(fits, key=lambda r: r.cost):
-        if r.structure or _topology(r.circuit) != _topology(baseline.circuit):
+        values = r.values
+        if getattr(r, "merged_back", None):  # a split fitted from the nominal: its two sections merged again
+            values = {n: v for n, v in r.merged_back.items() if n.lower() in free}
+        elif r.structure or _topology(r.circuit) != _topology(baseline.circuit):
             continue
-        trial = ctx.fit(baseline.circuit.with_values(r.values)).fit(max_nfev=80, tol=1e-8)
+        trial = ctx.fit(baseline.circuit.with_values(values)).fit(
+            max_nfev=200 if values is not r.values else 80, tol=1e-8)
         if trial.cost < best.cost * (1 - 1e-6):
             best = trial
     if best is not baseline:

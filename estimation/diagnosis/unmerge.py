@@ -234,8 +234,35 @@ class Unmerged:
                        "C": next((n for n in new if n.upper().startswith("C") and n != shunt
                                   and not n.upper().startswith("CS_SPLIT")), None)}
         self.shunt = shunt
+        self.k_in = k_in
+        self._start = sec.start
+        self.own_c = sec.series_caps[0] if sec.series_caps else None
         self.inductors = list(chain.inductors) + [self.second["L"]]
         self.total_h = float(inductance_matrix(circuit, chain.inductors).sum())
+
+    def merged_back(self, fitted: Circuit) -> dict[str, float]:
+        """Values of the split section's own elements with the two fitted sections merged into one again.
+
+        Inductances add with their mutual, resistances add, series
+        capacitances combine in series (a capacitor added across the first
+        half of a section ending at ground joins its capacitor to ground in
+        series with the new node's).
+        """
+        v = fitted.resolve(check=False)
+        get = lambda n: float(v[n.lower()])  # noqa: E731
+        l1, l2 = get(self.first["L"]), get(self.second["L"])
+        out = {self.first["L"]: l1 + l2 + 2 * self.k_in * np.sqrt(l1 * l2)}
+        if self.first["R"] and self.second["R"]:
+            out[self.first["R"]] = get(self.first["R"]) + get(self.second["R"])
+        if self.own_c and self.second["C"]:
+            c1, c2 = get(self.own_c), get(self.second["C"])
+            out[self.own_c] = c1 * c2 / (c1 + c2)
+        elif self.first["C"] and self.shunt and self.first["C"] != self.own_c:
+            ground = [e.name for e in fitted.of_kind("C") if set(e.nodes) == {self._start, GROUND}]
+            if ground:
+                c1, c2 = get(self.first["C"]), get(self.shunt)
+                out[ground[0]] = get(ground[0]) + c1 * c2 / (c1 + c2)
+        return out
 
     def seeds(self, free: Sequence[str], tail: np.ndarray, fractions: Sequence[float] = (0.35, 0.5, 0.65),
               cap_ratios: Sequence[float] = (0.5, 2.0), shunts: Sequence[float] = (0.3, 1.0, 3.0)) -> np.ndarray:
@@ -333,4 +360,4 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         res = fit.fit(x0s=first.x[None], grid=False, max_nfev=max_nfev, tol=1e-7)
     except (DiagnosisError, ValueError, np.linalg.LinAlgError):
         res = first
-    return (res if res.cost < first.cost else first), um.candidate
+    return (res if res.cost < first.cost else first), um
