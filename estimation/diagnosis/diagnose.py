@@ -12,14 +12,20 @@ Steps:
    the baseline it is reported as failed, never as a candidate. A candidate
    whose circuit values, with the effect removed, fit better than the
    baseline improves the baseline itself (so no gain comes from a better
-   optimum of the baseline).
+   optimum of the baseline). When the measurement shows a resonance the
+   fitted baseline lacks, a missing section is also sought from the nominal
+   circuit as two whole sections seeded at the measured resonances
+   (:mod:`.unmerge`); its two sections merged back refit the baseline.
 3. Forward selection: the cause with the lowest Bayesian information
    criterion ``BIC = N ln(RSS/N) + k ln N`` is named if it beats the
    baseline's BIC by ``min_delta_bic`` (10: "very strong" evidence on Kass and
    Raftery's scale) and removes at least ``min_gain`` of the cost; then each
    remaining cause is refitted together with those named, and the best is
    added while its BIC improves by ``min_delta_bic`` and it removes at least
-   ``min_step_gain`` of the remaining cost. Selection stops when the cost
+   ``min_step_gain`` of the remaining cost. A structural cause (a missing
+   section) must also remove that share of the cost on held-out points
+   (:mod:`.holdout`), and one found from the nominal circuit only while a
+   measured resonance is still missing from the model. Selection stops when the cost
    reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`).
 4. What is still above the noise after the last step is reported by band
    (:func:`.evidence.unexplained_bands`).
