@@ -304,7 +304,10 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                                "reason": "no measured resonance missing from the model without it"})
                 pool.pop(new_cause)
                 continue
-            held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale)
+            try:
+                held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale)
+            except _CANDIDATE_FAILURES:
+                held = -np.inf
             if held < need:
                 _log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
                      "only)", progress)
@@ -405,7 +408,10 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     """Every split and end addition: the new elements fitted alone first, the best ``top`` then in full.
 
     With ``effects`` (causes already named) their fitted parameters start
-    every fit and stay free.
+    every fit and stay free. Without them, and when the measurement has a
+    resonance the fitted baseline lacks, the sections split from the nominal
+    circuit (:func:`.unmerge.search_unmerged`) are tried too (not with effects:
+    its seeded fits cost too much time once effects are in the model).
     """
     circuit = base.fitted_circuit()
     ports = configuration_ports(ctx.configs)
@@ -437,7 +443,7 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.cause = "+".join(res.causes)
         if best is None or res.cost < best.cost:
             best = res
-    if ctx.nominal is not None and missing_modes(ctx.f, ctx.data, base.predicted) > 0:
+    if not effects and ctx.nominal is not None and missing_modes(ctx.f, ctx.data, base.predicted) > 0:
         found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
         if found is not None and (best is None or found[0].cost < best.cost):
             best, um = found
@@ -464,8 +470,11 @@ def _polish_baseline(ctx: _Context, baseline: FitResult, fits, progress: bool) -
             values = {n: v for n, v in r.merged_back.items() if n.lower() in free}
         elif r.structure or _topology(r.circuit) != _topology(baseline.circuit):
             continue
-        trial = ctx.fit(baseline.circuit.with_values(values)).fit(
-            max_nfev=200 if values is not r.values else 80, tol=1e-8)
+        try:
+            trial = ctx.fit(baseline.circuit.with_values(values)).fit(
+                max_nfev=200 if values is not r.values else 80, tol=1e-8)
+        except _CANDIDATE_FAILURES:
+            continue
         if trial.cost < best.cost * (1 - 1e-6):
             best = trial
     if best is not baseline:
@@ -517,8 +526,11 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
             keep = [e for i, e in enumerate(current.effects) if i != j]
             tail = np.concatenate([current.x[nc + offsets[i]: nc + offsets[i + 1]]
                                    for i in range(len(current.effects)) if i != j])
-            fit = ctx.fit(current.fitted_circuit(), keep)
-            res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
+            try:
+                fit = ctx.fit(current.fitted_circuit(), keep)
+                res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
+            except _CANDIDATE_FAILURES:  # the network degenerates without this effect: it stays
+                continue
             if res.bic - current.bic < min_delta_bic:
                 res.structure = current.structure
                 res.causes = [c for c in current.causes if c != eff.cause]

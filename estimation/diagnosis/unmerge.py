@@ -37,6 +37,7 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from pris_cosim.circuit import GROUND, Circuit
+from pris_cosim.errors import CircuitError
 from pris_cosim.expressions import Expression
 
 from ..resonances import find_resonances
@@ -300,7 +301,7 @@ def unmerged_candidates(nominal: Circuit, ports: Sequence[str]) -> list[Unmerged
         for j in range(len(ch.sections)):
             try:
                 out.append(Unmerged(nominal, ch, j))
-            except (ValueError, KeyError, StopIteration):
+            except (ValueError, KeyError, StopIteration, CircuitError, np.linalg.LinAlgError):
                 continue
     return out
 
@@ -340,7 +341,7 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
             rows = um.seeds(fit.free, tail)
             pred = fit.predict_batch(rows)
             r = fit.residuals_batch(rows)
-        except (DiagnosisError, ValueError, np.linalg.LinAlgError):
+        except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
             continue
         cost = np.sum(r * r, axis=1)
         score = np.array([resonance_score(f, measured, {k: v[i] for k, v in pred.items()}) for i in range(len(rows))])
@@ -349,7 +350,7 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         for i in pick:
             try:
                 res = fit.fit(x0s=rows[i][None], grid=False, max_nfev=screen_nfev, tol=1e-6)
-            except (DiagnosisError, ValueError, np.linalg.LinAlgError):
+            except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
                 continue
             screened.append((res.cost, um, fit, res))
     if not screened:
@@ -358,6 +359,6 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
     _, um, fit, first = screened[0]
     try:
         res = fit.fit(x0s=first.x[None], grid=False, max_nfev=max_nfev, tol=1e-7)
-    except (DiagnosisError, ValueError, np.linalg.LinAlgError):
+    except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
         res = first
     return (res if res.cost < first.cost else first), um
