@@ -91,6 +91,10 @@ class HiddenCase:
     port: str = ""
     baseline_model: str = ""
     truth: dict = field(default_factory=dict)
+    #: Constant-valued networks kept for labelling (:mod:`detectability`): ``sections`` (the truth's sections
+    #: without its frequency-dependent effects), ``baseline`` and ``merged`` (the baseline before and without
+    #: its jitter).
+    nets: dict = field(default_factory=dict, repr=False)
 
     @property
     def label(self) -> str:
@@ -185,6 +189,7 @@ def one_port_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003
     Cg = list(1.6e-9 * rng.uniform(0.7, 1.4, nt) / nt * 3)
     k = _couplings(nt, rng.uniform(0.55, 0.8), rng.uniform(1.5, 4.0))
     truth_net = _cascade(R, L, C, Cg, k)
+    nets = {"sections": truth_net.copy()}
     truth: dict = {"sections": nt}
     if missing:  # the baseline merges two adjacent sections of the truth
         j = int(rng.integers(0, n))
@@ -198,7 +203,9 @@ def one_port_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003
     else:
         Rb, Lb, Cb, Cgb, kb = R, L, C, Cg, k
     jit = lambda v: [x * rng.uniform(0.85, 1.15) for x in v]  # noqa: E731
+    nets["merged"] = _cascade(Rb, Lb, Cb, Cgb, kb)
     base_net = _cascade(jit(Rb), jit(Lb), jit(Cb), jit(Cgb), kb)
+    nets["baseline"] = base_net.copy()
     if "skin-effect" in causes:
         kind = str(rng.choice(["bessel", "sqrt", "thesis"]))
         f_s = float(10 ** rng.uniform(4.0, 5.0))
@@ -223,7 +230,8 @@ def one_port_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003
         truth["core"] = {"kind": kind, "r_hf": r_hf, "f_b": f_b}
     z = rs.impedance(truth_net, "n1", f)
     return HiddenCase("one-port", causes, seed, noise, f, {"Zin": _noisy(z, noise, rng)},
-                      baseline_netlist=rs.to_spice(base_net, f"{n}-section cascade (baseline)"), port="n1", truth=truth)
+                      baseline_netlist=rs.to_spice(base_net, f"{n}-section cascade (baseline)"), port="n1", truth=truth,
+                      nets=nets)
 
 
 # ------------------------------------------------------------------------------------------------ two-winding
@@ -272,6 +280,7 @@ def two_winding_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.
             e[3] *= rng.uniform(0.9, 1.1)
     group = group or str(rng.choice(["all", "lv", "hv"]))
     truth: dict = {"group": group}
+    nets = {"baseline": net.copy(), "merged": net.copy()}
     lv_r, hv_r = ["Ra1"], ["Rb1", "Rb2", "Rb3", "Rb4"]
     lv_l, hv_l = ["La1"], ["Lb1", "Lb2", "Lb3", "Lb4"]
     pick = {"lv": (lv_r, lv_l), "hv": (hv_r, hv_l), "all": (lv_r + hv_r, lv_l + hv_l)}[group]
@@ -285,6 +294,7 @@ def two_winding_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.
             pick = (pick[0] + ([f"Rb{j}h"] if group == "hv" else []), pick[1] + ([f"Lb{j}h"] if group == "hv" else []))
         else:
             pick = (pick[0] + [f"Rb{j}h"], pick[1] + [f"Lb{j}h"])
+    nets["sections"] = net.copy()
     if "skin-effect" in causes:
         kind = str(rng.choice(["bessel", "sqrt", "thesis"]))
         f_s = float(10 ** rng.uniform(1.5, 2.5))
@@ -309,4 +319,4 @@ def two_winding_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.
         truth["core"] = {"kind": kind, "r_hf": r_hf, "f_b": f_b}
     data = rs.two_winding_responses(net, f)
     return HiddenCase("two-winding", causes, seed, noise, f, {k: _noisy(v, noise, rng) for k, v in data.items()},
-                      baseline_model="hv-4section", truth=truth)
+                      baseline_model="hv-4section", truth=truth, nets=nets)

@@ -12,14 +12,20 @@ Steps:
    the baseline it is reported as failed, never as a candidate. A candidate
    whose circuit values, with the effect removed, fit better than the
    baseline improves the baseline itself (so no gain comes from a better
-   optimum of the baseline).
+   optimum of the baseline). When the measurement shows a resonance the
+   fitted baseline lacks, a missing section is also sought from the nominal
+   circuit as two whole sections seeded at the measured resonances
+   (:mod:`.unmerge`); its two sections merged back refit the baseline.
 3. Forward selection: the cause with the lowest Bayesian information
    criterion ``BIC = N ln(RSS/N) + k ln N`` is named if it beats the
    baseline's BIC by ``min_delta_bic`` (10: "very strong" evidence on Kass and
    Raftery's scale) and removes at least ``min_gain`` of the cost; then each
    remaining cause is refitted together with those named, and the best is
    added while its BIC improves by ``min_delta_bic`` and it removes at least
-   ``min_step_gain`` of the remaining cost. Selection stops when the cost
+   ``min_step_gain`` of the remaining cost. A structural cause (a missing
+   section) must also remove that share of the cost on held-out points
+   (:mod:`.holdout`), and one found from the nominal circuit only while a
+   measured resonance is still missing from the model. Selection stops when the cost
    reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`).
 4. What is still above the noise after the last step is reported by band
    (:func:`.evidence.unexplained_bands`).
@@ -43,13 +49,17 @@ from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
 
 from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
 from .evidence import band_table, localise, noise_floor, resonance_comparison, unexplained_bands
+from .holdout import held_out_gain
 from .fit import DiagnosisError, FitResult, FrequencyFit, configuration_ports, group_names, significant
 from .realise import realise_extended
 from .sections import section_candidates
+from .unmerge import missing_modes, search_unmerged
 
 MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
 #: Selection stops once the cost is within this factor of the noise floor.
 NOISE_MARGIN = 1.25
+#: Causes that add circuit elements: named only if they also pass the held-out check (:mod:`.holdout`).
+STRUCTURAL = ("missing-section",)
 
 
 @dataclass
@@ -141,6 +151,7 @@ class _Context:
     scale: float
     one_port: bool
     progress: bool
+    nominal: Circuit | None = None
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = ()) -> FrequencyFit:
         return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
@@ -245,7 +256,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         )
     configs = list(model.configurations.values())
     one_port = len(configs) == 1 and all(r.node is None for r in configs[0].responses)
-    ctx = _Context(f, data, configs, fixed, impedance_scale, one_port, progress)
+    ctx = _Context(f, data, configs, fixed, impedance_scale, one_port, progress,
+                   nominal=model.circuit if model.family != ("lumped",) else None)
     floor = noise_floor(f, data)
     _log(f"noise floor {floor['cost']:.3g} (noise RMS "
          + ", ".join(f"{k} {100 * v:.2g} %" for k, v in floor["per_response"].items()) + ")", progress)
@@ -285,6 +297,24 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         if not significant(current.bic, current.cost, best.bic, best.cost, min_delta_bic, need):
             break
         new_cause = next(c for c in best.causes if c not in chosen)
+        if new_cause in STRUCTURAL:
+            if getattr(best, "merged_back", None) and not missing_modes(f, data, current.predicted):
+                _log(f"{new_cause}: the model without it has every measured resonance: refused", progress)
+                failed.append({"cause": new_cause, "cost": best.cost,
+                               "reason": "no measured resonance missing from the model without it"})
+                pool.pop(new_cause)
+                continue
+            try:
+                held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale)
+            except _CANDIDATE_FAILURES:
+                held = -np.inf
+            if held < need:
+                _log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
+                     "only)", progress)
+                failed.append({"cause": new_cause, "cost": best.cost,
+                               "reason": f"held-out gain {held:.3f} below {need} (alternate points)"})
+                pool.pop(new_cause)
+                continue
         steps.append({"cause": new_cause, "gain": 1 - best.cost / current.cost, "delta_bic": current.bic - best.bic,
                       "cost": best.cost, "total_gain": 1 - best.cost / baseline.cost,
                       "model": best.structure + ("; " if best.structure and best.effects else "")
@@ -378,7 +408,10 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     """Every split and end addition: the new elements fitted alone first, the best ``top`` then in full.
 
     With ``effects`` (causes already named) their fitted parameters start
-    every fit and stay free.
+    every fit and stay free. Without them, and when the measurement has a
+    resonance the fitted baseline lacks, the sections split from the nominal
+    circuit (:func:`.unmerge.search_unmerged`) are tried too (not with effects:
+    its seeded fits cost too much time once effects are in the model).
     """
     circuit = base.fitted_circuit()
     ports = configuration_ports(ctx.configs)
@@ -410,16 +443,38 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.cause = "+".join(res.causes)
         if best is None or res.cost < best.cost:
             best = res
+    if not effects and ctx.nominal is not None and missing_modes(ctx.f, ctx.data, base.predicted) > 0:
+        found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
+        if found is not None and (best is None or found[0].cost < best.cost):
+            best, um = found
+            best.structure = um.candidate.how
+            best.merged_back = {**best.values, **um.merged_back(best.fitted_circuit())}
+            best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
+            best.cause = "+".join(best.causes)
     return best
 
 
 def _polish_baseline(ctx: _Context, baseline: FitResult, fits, progress: bool) -> FitResult:
-    """Refit the baseline from each candidate's circuit values (same structure); keep the best baseline."""
+    """Refit the baseline from each candidate's circuit values; keep the best baseline.
+
+    Candidates of the same structure give their values; a section split from
+    the nominal circuit (:mod:`.unmerge`) gives its values with the two
+    sections merged back, so a split that only helped the fit out of a poor
+    optimum of the baseline gains nothing.
+    """
     best = baseline
+    free = {n.lower() for n in baseline.values}
     for r in sorted(fits, key=lambda r: r.cost):
-        if r.structure or _topology(r.circuit) != _topology(baseline.circuit):
+        values = r.values
+        if getattr(r, "merged_back", None):  # a split fitted from the nominal: its two sections merged again
+            values = {n: v for n, v in r.merged_back.items() if n.lower() in free}
+        elif r.structure or _topology(r.circuit) != _topology(baseline.circuit):
             continue
-        trial = ctx.fit(baseline.circuit.with_values(r.values)).fit(max_nfev=80, tol=1e-8)
+        try:
+            trial = ctx.fit(baseline.circuit.with_values(values)).fit(
+                max_nfev=200 if values is not r.values else 80, tol=1e-8)
+        except _CANDIDATE_FAILURES:
+            continue
         if trial.cost < best.cost * (1 - 1e-6):
             best = trial
     if best is not baseline:
@@ -471,8 +526,11 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
             keep = [e for i, e in enumerate(current.effects) if i != j]
             tail = np.concatenate([current.x[nc + offsets[i]: nc + offsets[i + 1]]
                                    for i in range(len(current.effects)) if i != j])
-            fit = ctx.fit(current.fitted_circuit(), keep)
-            res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
+            try:
+                fit = ctx.fit(current.fitted_circuit(), keep)
+                res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
+            except _CANDIDATE_FAILURES:  # the network degenerates without this effect: it stays
+                continue
             if res.bic - current.bic < min_delta_bic:
                 res.structure = current.structure
                 res.causes = [c for c in current.causes if c != eff.cause]

@@ -1,0 +1,80 @@
+"""Is a hidden missing section detectable at all? Decided with the reference solver, not with the diagnosis.
+
+A case whose truth has one section more than its baseline can only be
+diagnosed if no network of the baseline's structure reproduces the truth
+within the noise. This module fits the baseline's structure (its R, L and C
+values free in log scale, couplings as given) to the truth's responses
+without noise, using only :mod:`refsolver` and :func:`scipy.optimize.least_squares`
+(no code of the diagnosis), from the baseline's values and from the exact
+merge of the truth's sections (the baseline before its jitter).
+
+Criterion: the missing section is *undetectable* when the best fit's mean
+squared complex log error on every response is below the noise's own,
+``E|n|^2 = 2 s^2`` for the benchmark's noise (``s`` relative in magnitude,
+``s`` rad in phase): the truth then lies within the noise of a network the
+baseline's structure can reach. Hidden effects other than the missing
+section are left out of both sides (they are not what is being asked about).
+A fit that fails to get there leaves the case counted as detectable, so the
+count of undetectable cases is a lower bound.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+import refsolver as rs
+
+
+def _responses(net: rs.Net, kind: str, f: np.ndarray) -> dict[str, np.ndarray]:
+    if kind == "one-port":
+        return {"Zin": rs.impedance(net, "n1", f)}
+    return rs.two_winding_responses(net, f)
+
+
+def best_baseline_fit(case, max_nfev: int = 60) -> dict[str, float]:
+    """Fit of the baseline's structure to the truth's sections (no noise, no other effects).
+
+    Parameters
+    ----------
+    case : hidden_cases.HiddenCase
+        A case made with ``nets`` kept (every case of :mod:`hidden_cases`).
+    max_nfev : int
+        Evaluations per start.
+
+    Returns
+    -------
+    dict
+        ``cost`` (largest over responses of the mean squared complex log
+        error), ``noise`` (``2 s^2``), ``detectable`` (bool).
+    """
+    f = case.frequency_hz
+    truth = _responses(case.nets["sections"], case.kind, f)
+    names = [e[0] for e in case.nets["baseline"].elements if e[0][0].upper() in "RLC"]
+
+    def net_of(start: rs.Net, x: np.ndarray) -> rs.Net:
+        net = start.copy()
+        for n, v in zip(names, x):
+            net.set(n, net.get(n)[3] * np.exp(v))
+        return net
+
+    def errors(start: rs.Net, x: np.ndarray) -> dict[str, np.ndarray]:
+        model = _responses(net_of(start, x), case.kind, f)
+        return {k: np.log(model[k] / truth[k]) for k in truth}
+
+    def residuals(x: np.ndarray, start: rs.Net) -> np.ndarray:
+        e = errors(start, x)
+        r = np.concatenate([np.concatenate([v.real, v.imag]) / np.sqrt(2 * v.size) for v in e.values()])
+        return np.where(np.isfinite(r), r, 1e3)
+
+    best = np.inf
+    starts = [case.nets["merged"]]
+    if case.nets["baseline"].elements != case.nets["merged"].elements:
+        starts.append(case.nets["baseline"])
+    for start in starts:
+        sol = least_squares(residuals, np.zeros(len(names)), args=(start,), bounds=(-np.log(100), np.log(100)),
+                            max_nfev=max_nfev, x_scale=1.0)
+        e = errors(start, sol.x)
+        best = min(best, max(float(np.mean(np.abs(v) ** 2)) for v in e.values()))
+    noise = 2 * case.noise ** 2
+    return {"cost": best, "noise": noise, "detectable": bool(best > noise)}
