@@ -39,13 +39,20 @@ def fingerprint(reference):
     return load_or_fit(reference, progress=False)
 
 
+def _diagnose_one(args: tuple) -> dict:
+    fingerprint, reference, path = args
+    return diagnose_sweep(fingerprint, reference, load_sweep(path), progress=False)
+
+
 @pytest.fixture(scope="module")
 def diagnoses(reference, fingerprint):
-    out = {}
-    for kind, pattern in KINDS.items():
-        for nn in TAPS:
-            out[kind, nn] = diagnose_sweep(fingerprint, reference, load_sweep(DATA / pattern.format(nn)), progress=False)
-    return out
+    """The 16 shorts diagnosed against the one fitted reference, two at a time."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    keys = [(kind, nn) for kind in KINDS for nn in TAPS]
+    jobs = [(fingerprint, reference, DATA / KINDS[kind].format(nn)) for kind, nn in keys]
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        return dict(zip(keys, pool.map(_diagnose_one, jobs)))
 
 
 # ---------------------------------------------------------------------------
