@@ -32,7 +32,7 @@ nothing extra.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -72,16 +72,22 @@ def missing_modes(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: 
         resonance of the same kind within :data:`MODE_TOLERANCE`.
     """
     worst = 0
+    for a, b in _paired_resonances(f, measured, predicted):
+        unmatched = sum(1 for x in a if not b.size or np.min(np.abs(b / x - 1)) > MODE_TOLERANCE)
+        worst = max(worst, a.size - b.size, unmatched if a.size > b.size else 0)
+    return worst
+
+
+def _paired_resonances(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: Mapping[str, np.ndarray]
+                       ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Per impedance (``Z...``) and kind (peak, dip): measured and model resonance frequencies, Hz."""
     for name, h in measured.items():
         if not name.startswith("Z") or name not in predicted:
             continue
         fm, pm = _resonances(f, h)
         fp, pp = _resonances(f, predicted[name])
         for kind in (True, False):
-            a, b = fm[pm == kind], fp[pp == kind]
-            unmatched = sum(1 for x in a if not b.size or np.min(np.abs(b / x - 1)) > MODE_TOLERANCE)
-            worst = max(worst, a.size - b.size, unmatched if a.size > b.size else 0)
-    return worst
+            yield fm[pm == kind], fp[pp == kind]
 
 
 def resonance_score(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: Mapping[str, np.ndarray]) -> float:
@@ -93,17 +99,11 @@ def resonance_score(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted
     """
     cap = float(np.log(1.5))
     score = 0.0
-    for name, h in measured.items():
-        if not name.startswith("Z") or name not in predicted:
-            continue
-        fm, pm = _resonances(f, h)
-        fp, pp = _resonances(f, predicted[name])
-        for kind in (True, False):
-            a, b = fm[pm == kind], fp[pp == kind]
-            for x in a:
-                score += min(cap, float(np.min(np.abs(np.log(b / x))))) if b.size else cap
-            for x in b:
-                score += 0.5 * (min(cap, float(np.min(np.abs(np.log(a / x))))) if a.size else cap)
+    for a, b in _paired_resonances(f, measured, predicted):
+        for x in a:
+            score += min(cap, float(np.min(np.abs(np.log(b / x))))) if b.size else cap
+        for x in b:
+            score += 0.5 * (min(cap, float(np.min(np.abs(np.log(a / x))))) if a.size else cap)
     return score
 
 
