@@ -452,9 +452,10 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
         raise EstimationInputError(f"approach must be frequency, frequency-simulated, time, emd or iemd (got {approach_name!r})")
     from .estimate import resonance_proxy
 
-    stand_in = proxy if proxy is not None else approach
-    if isinstance(stand_in, ap.AnalyticFrequency):
-        proxy = resonance_proxy(stand_in, params, circuit, conf) or proxy
+    exact = kind == "responses-csv" or (kind == "simulated" and tgt.get("method", "analytic") == "analytic")
+    if exact and proxy is None and isinstance(approach, ap.AnalyticFrequency):
+        # response targets only: a record's Welch H1 smooths sharp resonances and shifts their peaks
+        proxy = resonance_proxy(approach, params, circuit, conf)
     return _fit_and_report(cfg, approach, params, model, approach_name, metric, known_target, t0, progress,
                            proxy)
 

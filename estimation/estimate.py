@@ -41,7 +41,7 @@ import numpy as np
 from . import approaches as ap
 from .optimisers import Budget, minimize
 from .parameters import ParameterSet
-from .verdict import noise_floor, verdict
+from .verdict import residual_tolerance, verdict
 
 #: Ties assumed when a config names neither parameters nor ties: the thesis's estimation vectors
 #: (two-section 4.1.3: R2 = R1, C2 = C1) and, for the 4-section cascade, the uniform winding of the
@@ -152,8 +152,7 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
     stages: list[dict[str, Any]] = []
     nfev = 0
     best_x, best_c, message = None, math.inf, ""
-    floor = 3.0 * (noise_floor(np.asarray(data, float)) if noise is None else float(noise))
-    floor = max(floor, 1e-6 * float(np.sqrt(np.mean(np.square(np.asarray(data, float))))) if np.size(data) else 0.0)
+    floor = residual_tolerance(data, noise)[2]  # the verdict's own "explains the data" level
     more = int(plan.get("max_restarts", plan["restarts"]))
     for k in range(max(int(plan["restarts"]), more)):
         if time_limit_s is not None and k > 0 and time.perf_counter() - t0 > time_limit_s:

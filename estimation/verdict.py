@@ -55,6 +55,20 @@ STEP_TOL = 1e-3
 NULL_RTOL = 1e-8
 
 
+def residual_tolerance(data: np.ndarray, noise: float | None = None, scale: float | None = None
+                       ) -> tuple[float, float, float]:
+    """``(noise, scale, tolerance)`` of a fit to ``data``: the residual RMS that counts as explaining them.
+
+    ``noise``: given, or :func:`noise_floor` of the data; ``scale``: given, or the data's RMS;
+    tolerance ``max(3 noise, 1e-6 scale)``. Same unit as ``data``.
+    """
+    d = np.asarray(data, float).ravel()
+    d = d[np.isfinite(d)]
+    noise = noise_floor(d) if noise is None else float(noise)
+    scale = float(np.sqrt(np.mean(d ** 2))) if scale is None and d.size else float(scale or 1.0)
+    return noise, scale, max(3.0 * noise, 1e-6 * scale, 1e-300)
+
+
 def noise_floor(data: np.ndarray) -> float:
     """Noise standard deviation of a sampled record, from its fourth differences (robust).
 
@@ -193,11 +207,7 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
     r = np.asarray(residuals(x[None]), float)[0]
     finite = np.isfinite(r)
     rms = float(np.sqrt(np.mean(r[finite] ** 2))) if finite.all() and r.size else math.inf
-    d = np.asarray(data, float).ravel()
-    d = d[np.isfinite(d)]
-    noise = noise_floor(d) if noise is None else float(noise)
-    scale = float(np.sqrt(np.mean(d ** 2))) if scale is None and d.size else float(scale or 1.0)
-    tol = max(3.0 * noise, 1e-6 * scale, 1e-300)
+    noise, scale, tol = residual_tolerance(data, noise, scale)
     reasons: list[str] = []
     if not rms <= tol:
         reasons.append(f"residual RMS {rms:.3g} above the data's noise floor ({tol:.3g})")
@@ -259,4 +269,4 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
     }
 
 
-__all__ = ["verdict", "fisher_information", "noise_floor", "UNCERTAIN", "AT_BOUND", "AGREE"]
+__all__ = ["verdict", "fisher_information", "noise_floor", "residual_tolerance", "UNCERTAIN", "AT_BOUND", "AGREE"]
