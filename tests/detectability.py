@@ -5,8 +5,10 @@ diagnosed if no network of the baseline's structure reproduces the truth
 within the noise. This module fits the baseline's structure (its R, L and C
 values free in log scale, couplings as given) to the truth's responses
 without noise, using only :mod:`refsolver` and :func:`scipy.optimize.least_squares`
-(no code of the diagnosis), from the baseline's values and from the exact
-merge of the truth's sections (the baseline before its jitter).
+(no code of the diagnosis), from the baseline's values, from the exact
+merge of the truth's sections (the baseline before its jitter) and from
+random starts around the merge (a local fit from one start can stop in a
+poor optimum and call a case detectable that is not).
 
 Criterion: the missing section is *undetectable* when the best fit's mean
 squared complex log error on every response is below the noise's own,
@@ -32,7 +34,7 @@ def _responses(net: rs.Net, kind: str, f: np.ndarray) -> dict[str, np.ndarray]:
     return rs.two_winding_responses(net, f)
 
 
-def best_baseline_fit(case, max_nfev: int = 60) -> dict[str, float]:
+def best_baseline_fit(case, max_nfev: int = 60, random_starts: int = 4) -> dict[str, float]:
     """Fit of the baseline's structure to the truth's sections (no noise, no other effects).
 
     Parameters
@@ -41,6 +43,8 @@ def best_baseline_fit(case, max_nfev: int = 60) -> dict[str, float]:
         A case made with ``nets`` kept (every case of :mod:`hidden_cases`).
     max_nfev : int
         Evaluations per start.
+    random_starts : int
+        Starts drawn around the merge (log-normal, 30 %, fixed seed).
 
     Returns
     -------
@@ -68,11 +72,14 @@ def best_baseline_fit(case, max_nfev: int = 60) -> dict[str, float]:
         return np.where(np.isfinite(r), r, 1e3)
 
     best = np.inf
-    starts = [case.nets["merged"]]
+    zero = np.zeros(len(names))
+    starts = [(case.nets["merged"], zero)]
     if case.nets["baseline"].elements != case.nets["merged"].elements:
-        starts.append(case.nets["baseline"])
-    for start in starts:
-        sol = least_squares(residuals, np.zeros(len(names)), args=(start,), bounds=(-np.log(100), np.log(100)),
+        starts.append((case.nets["baseline"], zero))
+    rng = np.random.default_rng(7)
+    starts += [(case.nets["merged"], 0.3 * rng.standard_normal(len(names))) for _ in range(random_starts)]
+    for start, x0 in starts:
+        sol = least_squares(residuals, x0, args=(start,), bounds=(-np.log(100), np.log(100)),
                             max_nfev=max_nfev, x_scale=1.0)
         e = errors(start, sol.x)
         best = min(best, max(float(np.mean(np.abs(v) ** 2)) for v in e.values()))

@@ -1,26 +1,36 @@
 """The catalogue of frequency-response causes: each a change of branch impedances with frequency.
 
 Every cause comes in the thesis's form, exactly as printed (real-valued
-element values, :mod:`pris_cosim.freqdep`), and in a causal form (a complex
-impedance that a passive network can realise). Both forms name the same
-cause; the diagnosis fits both and keeps the better. With several windings
-each cause is tried per winding group (``lv`` only, ``hv`` only, ``all``).
+element values, :mod:`pris_cosim.freqdep`), and in causal forms (complex
+impedances that a passive network can realise): a constant-phase (power-law)
+form, and for the winding effects a relaxation form with a corner frequency
+below which the element keeps its low-frequency value (a power law holds
+only far above a material's or a conductor's corner). All forms name the
+same cause; the diagnosis fits them and keeps the best. With several
+windings each cause is tried per winding group (``lv`` only, ``hv`` only,
+``all``).
 
 ``skin-effect``
     thesis (2.6): ``R(f) = R_linear / c [1 + a (f/f0 - 1)^b]`` for
     ``f >= f0`` (``R_linear / c`` below; ``R_linear / c`` is the fitted
     circuit resistance, so ``c = 1``); causal: ``R (1 + a (j f/f_ref)^b)``
     (``b = 1/2`` is the classical skin effect; its reactance is the internal
-    inductance).
+    inductance); relaxation: ``R (1 + a [(1 + j f/f_c)^b - 1])``: ``R`` up to
+    about ``f_c`` (skin depth comparable with the conductor), then the
+    power law; ``a = 1, b = 1/2`` is close to a round wire's Bessel impedance.
 ``core-loss``
-    thesis (2.4): ``R_c(f) = a f / (f + b)``; causal: ``a (j f/b) / (1 + j f/b)``
-    (``a`` in parallel with ``a / (2 pi b)`` H). A circuit without a core-loss
-    resistor (one in parallel with an inductor) gets one at the port.
+    thesis (2.4): ``R_c(f) = a f / (f + b)``; causal: ``a x / (1 + x)``,
+    ``x = (j f/b)^alpha`` (``alpha = 1``: ``a`` in parallel with
+    ``a / (2 pi b)`` H; below 1 the spread corner of eddy currents in
+    laminations). A circuit without a core-loss resistor (one in parallel
+    with an inductor) gets one at the port.
 ``magnetising-inductance``
     thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = f_ref^b``: ``a`` and
     ``L_linear`` are not separable, so ``L(f_ref) = L_linear``); causal:
-    ``L (j f/f_ref)^(-b)``. Applied to the winding inductances with their
-    mutuals (``M_ij`` scales with ``sqrt(L_i L_j)``).
+    ``L (j f/f_ref)^(-b)``; relaxation (a Davidson-Cole permeability):
+    ``L (1 + j f/f_m)^(-b)``, the initial permeability up to about ``f_m``.
+    Applied to the winding inductances with their mutuals (``M_ij`` scales
+    with ``sqrt(L_i L_j)``).
 ``stray-capacitance``
     one-port data: a lossy fixture capacitance across the port, the causal
     constant-phase admittance ``Y = w0 C (j f/f0)^alpha`` (``alpha = 1`` an
@@ -128,11 +138,13 @@ class Effect:
     group: str = "all"
     parameters: list[ExtraParameter] = field(default_factory=list)
     f_ref: float = 1.0
+    #: Highest frequency of the data, Hz (bounds the corner frequencies of relaxation forms).
+    f_max: float = 0.0
 
     @property
     def label(self) -> str:
         """``cause`` with its form and group, e.g. ``skin-effect (2.6) [hv]``."""
-        form = {"thesis": self.thesis_eq, "causal": "causal"}.get(self.form, self.form)
+        form = self.thesis_eq if self.form == "thesis" else self.form
         return f"{self.cause} ({form}) [{self.group}]"
 
     thesis_eq = ""
@@ -170,6 +182,18 @@ class Effect:
         return circuit, ""
 
 
+def _corner_range(e: Effect) -> tuple[float, float]:
+    """Bounds of a relaxation form's corner frequency: a decade and a half beyond the data on either side, Hz."""
+    hi = e.f_max if e.f_max > e.f_ref else 1e4 * e.f_ref
+    return e.f_ref / 30, hi * 30
+
+
+def _corner_starts(e: Effect) -> tuple[float, ...]:
+    """Starting corner frequencies: near the bottom, the middle and the top of the data's band, Hz."""
+    hi = e.f_max if e.f_max > e.f_ref else 1e4 * e.f_ref
+    return (3 * e.f_ref, float(np.sqrt(e.f_ref * hi)), hi / 3)
+
+
 def _diag(names: Sequence[str], dz: np.ndarray) -> list[tuple[list[str], np.ndarray]]:
     """Diagonal changes ``dz`` (P, F, m) as one block."""
     P, F, m = dz.shape
@@ -192,6 +216,13 @@ class SkinEffect(Effect):
                 ExtraParameter("f0", self.f_ref / 30, self.f_ref * 3e3, (self.f_ref / 3, self.f_ref * 3),
                                description="f0: frequency of R_linear, Hz"),
             ]
+        elif self.form == "relaxation":
+            lo, hi = _corner_range(self)
+            self.parameters = [
+                ExtraParameter("a", 1e-3, 1e4, (0.3, 3.0), description="amplitude of the rise (x R)"),
+                ExtraParameter("b", 0.2, 1.0, (0.5,), log=False, description="high-frequency exponent"),
+                ExtraParameter("fc", lo, hi, _corner_starts(self), description="corner frequency, Hz"),
+            ]
         else:
             self.parameters = [
                 ExtraParameter("a", 1e-4, 1e4, (1e-3, 0.3, 10.0), description="resistance rise at f_ref (x R)"),
@@ -205,6 +236,8 @@ class SkinEffect(Effect):
         """``R(f) / R`` (P, F)."""
         if self.form == "thesis":
             return thesis_skin_resistance(f[None, :], 1.0, _p(p, "a"), _p(p, "b"), 1.0, _p(p, "f0")).astype(complex)
+        if self.form == "relaxation":
+            return 1 + _p(p, "a") * ((1 + 1j * f[None, :] / _p(p, "fc")) ** _p(p, "b") - 1)
         return 1 + _p(p, "a") * (1j * f[None, :] / self.f_ref) ** _p(p, "b")
 
     def branch_changes(self, circuit, groups, values, f, p):
@@ -217,6 +250,9 @@ class SkinEffect(Effect):
         if self.form == "thesis":
             return (f"R(f) = R_linear/c [1 + a (f/f0 - 1)^b] for f >= f0 (thesis 2.6), c = 1, a = {p['a']:.4g}, "
                     f"b = {p['b']:.4g}, f0 = {p['f0']:.4g} Hz")
+        if self.form == "relaxation":
+            return (f"Z_R(f) = R [1 + a ((1 + j f/f_c)^b - 1)], a = {p['a']:.4g}, b = {p['b']:.4g}, "
+                    f"f_c = {p['fc']:.4g} Hz")
         return f"Z_R(f) = R [1 + a (j f/{self.f_ref:.4g} Hz)^b], a = {p['a']:.4g}, b = {p['b']:.4g}"
 
     def realise(self, circuit, groups, p, fmin, fmax):
@@ -245,6 +281,9 @@ class CoreLoss(Effect):
             ExtraParameter("a", 1e-3, 1e12, (1e6,), description="a_Ro: high-frequency core-loss resistance, Ohm"),
             ExtraParameter("b", 1e-3, 1e12, (1e3,), description="b_Ro: corner frequency, Hz"),
         ]
+        if self.form != "thesis":
+            self.parameters.append(ExtraParameter("alpha", 0.3, 1.0, (1.0, 0.6), log=False,
+                                                  description="spread of the corner (1: one R-L corner)"))
 
     def resistor(self, circuit: Circuit, groups: Groups) -> str:
         return core_loss_resistor(circuit) or "Rcore"
@@ -271,13 +310,16 @@ class CoreLoss(Effect):
         base = float(values[rc.lower()]) if rc and rc != "Rcore" else 30 * scale
         fmid = float(np.sqrt(fmin * fmax))
         starts = [{"a": base * m, "b": fmid * g} for m in (1.0, 10.0) for g in (0.01, 0.1, 1.0, 10.0)]
-        return starts + [{"a": 1e11, "b": fmid}]  # effectively no core loss: never worse than the baseline
+        starts = starts + [{"a": 1e11, "b": fmid}]  # effectively no core loss: never worse than the baseline
+        if self.form == "thesis":
+            return starts
+        return [{**x, "alpha": al} for al in (1.0, 0.6) for x in starts]
 
     def resistance(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
         """``R_c(f)`` (P, F), complex for the causal form."""
         if self.form == "thesis":
             return core_loss_resistance(f[None, :], _p(p, "a"), _p(p, "b")).astype(complex)
-        x = 1j * f[None, :] / _p(p, "b")
+        x = (1j * f[None, :] / _p(p, "b")) ** _p(p, "alpha")
         return _p(p, "a") * x / (1 + x)
 
     def branch_changes(self, circuit, groups, values, f, p):
@@ -288,7 +330,8 @@ class CoreLoss(Effect):
     def formula(self, p):
         if self.form == "thesis":
             return f"R_c(f) = a f / (f + b) (thesis 2.4), a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz"
-        return f"Z_c(f) = a (j f/b) / (1 + j f/b), a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz"
+        return (f"Z_c(f) = a x / (1 + x), x = (j f/b)^alpha, a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz, "
+                f"alpha = {p['alpha']:.4g}")
 
     def realise(self, circuit, groups, p, fmin, fmax):
         name = self.resistor(circuit, groups)
@@ -296,9 +339,13 @@ class CoreLoss(Effect):
             lad = fit_resistance(lambda x: core_loss_resistance(x, p["a"], p["b"]), fmin, fmax, 10)
             note = ("a real-valued R_c(f) has no causal realisation: the ladder follows its resistance and adds its "
                     "own reactance")
-        else:
+        elif p["alpha"] > 1 - 1e-6:
             lad = FosterRL(0.0, 0.0, np.array([p["a"]]), np.array([p["a"] / (2 * np.pi * p["b"])]))
-            note = "R_c(f) realised exactly by a in parallel with a / (2 pi b)"
+            note = "Z_c(f) realised exactly by a in parallel with a / (2 pi b)"
+        else:
+            pp = {k: np.array([v]) for k, v in p.items()}
+            lad = fit_impedance(lambda x: self.resistance(np.atleast_1d(x), pp)[0], fmin, fmax, 10)
+            note = "Z_c(f) realised by a passive R-L ladder (its spread corner by several R-L corners)"
         return replace_with_ladder(_numeric(circuit, name), name, lad), note
 
 
@@ -309,6 +356,13 @@ class MagnetisingInductance(Effect):
         self.cause = "magnetising-inductance"
         self.thesis_eq = "2.5"
         lo = 0.0 if self.form == "thesis" else 1e-4
+        if self.form == "relaxation":
+            f_lo, f_hi = _corner_range(self)
+            self.parameters = [ExtraParameter("b", 1e-4, 0.6, (0.02, 0.05, 0.1), log=False,
+                                              description="high-frequency exponent"),
+                               ExtraParameter("fm", f_lo, f_hi, _corner_starts(self),
+                                              description="relaxation frequency, Hz")]
+            return
         self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
                                           description="b_Lo: exponent")]
 
@@ -331,6 +385,8 @@ class MagnetisingInductance(Effect):
         if self.form == "thesis":
             b = _p(p, "b")
             return magnetising_inductance(f[None, :], 1.0, self.f_ref ** b, b).astype(complex)
+        if self.form == "relaxation":
+            return (1 + 1j * f[None, :] / _p(p, "fm")) ** (-_p(p, "b"))
         return (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
 
     def branch_changes(self, circuit, groups, values, f, p):
@@ -353,6 +409,8 @@ class MagnetisingInductance(Effect):
         if self.form == "thesis":
             return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
                     f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
+        if self.form == "relaxation":
+            return f"Z_L(f) = j w L (1 + j f/f_m)^(-b), b = {p['b']:.4g}, f_m = {p['fm']:.4g} Hz"
         return f"Z_L(f) = j w L (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}"
 
     def realise(self, circuit, groups, p, fmin, fmax):
@@ -469,13 +527,13 @@ def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, 
     out: list[Effect] = []
     names = [g for g in groups.resistors if g != "all"]
     group_list = (names + ["all"]) if len(names) > 1 else ["all"]
-    for form in ("thesis", "causal"):
+    for form in ("thesis", "causal", "relaxation"):
         if cause == "skin-effect":
-            out += [SkinEffect(form=form, group=g, f_ref=f_ref) for g in group_list]
+            out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
         elif cause == "magnetising-inductance":
-            out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref) for g in group_list]
-        elif cause == "core-loss":
-            out.append(CoreLoss(form=form, group="all", f_ref=f_ref))
+            out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
+        elif cause == "core-loss" and form != "relaxation":
+            out.append(CoreLoss(form=form, group="all", f_ref=f_ref, f_max=f_max))
     if one_port and cause == "stray-capacitance":
         w = 2 * np.pi * f_max
         out.append(StrayCapacitance(form="causal", group="port", f_ref=f_max, c_scale=1 / (w * scale)))

@@ -60,6 +60,12 @@ MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baselin
 NOISE_MARGIN = 1.25
 #: Causes that add circuit elements: named only if they also pass the held-out check (:mod:`.holdout`).
 STRUCTURAL = ("missing-section",)
+#: A section split from the nominal circuit is sought when the fitted baseline's cost is this many times the noise
+#: floor (or a measured resonance is missing from it).
+UNMERGE_ABOVE_FLOOR = 10.0
+#: ... and, with every measured resonance already in the model without it, named only if its fit comes within this
+#: factor of ``NOISE_MARGIN`` times the noise floor.
+STRUCTURAL_FLOOR = 2.0
 
 
 @dataclass
@@ -152,6 +158,7 @@ class _Context:
     one_port: bool
     progress: bool
     nominal: Circuit | None = None
+    floor: float = 0.0
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = ()) -> FrequencyFit:
         return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
@@ -246,7 +253,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                       starts[best_i].configurations, family=("lumped",))
         _log(f"no baseline given: lumped R-L-C fitted (cost {baseline.cost:.4g})", progress)
     else:
-        baseline = FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed).fit(max_nfev=200)
+        baseline = fit_multistart(FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed))
         _log(f"baseline {model.name} fitted: cost {baseline.cost:.4g} in {baseline.wall_s:.1f} s", progress)
     worst = max(float(np.sqrt(np.mean(np.abs(e) ** 2))) for e in baseline.errors.values())
     if worst > MAX_BASELINE_RMS:
@@ -259,6 +266,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     ctx = _Context(f, data, configs, fixed, impedance_scale, one_port, progress,
                    nominal=model.circuit if model.family != ("lumped",) else None)
     floor = noise_floor(f, data)
+    ctx.floor = floor["cost"]
     _log(f"noise floor {floor['cost']:.3g} (noise RMS "
          + ", ".join(f"{k} {100 * v:.2g} %" for k, v in floor["per_response"].items()) + ")", progress)
 
@@ -266,7 +274,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # baseline adopts them and every cause is fitted again from it (at most twice)
     # (each cause keeps its best fit over the passes; no second pass once a cause reaches the noise floor)
     results, failed, variants_tried = {}, [], {}
-    for attempt in range(3):
+    if baseline.cost <= NOISE_MARGIN * floor["cost"]:
+        _log("the baseline fits to the noise floor: no cause is fitted", progress)
+    for attempt in range(3 if baseline.cost > NOISE_MARGIN * floor["cost"] else 0):
         res_i, failed_i, variants_i = _single_causes(ctx, todo, baseline, progress)
         for cause, r in res_i.items():
             if cause not in results or r.cost < results[cause].cost:
@@ -298,10 +308,13 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             break
         new_cause = next(c for c in best.causes if c not in chosen)
         if new_cause in STRUCTURAL:
-            if getattr(best, "merged_back", None) and not missing_modes(f, data, current.predicted):
-                _log(f"{new_cause}: the model without it has every measured resonance: refused", progress)
+            if (getattr(best, "merged_back", None) and best.cost > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
+                    and not missing_modes(f, data, current.predicted)):
+                _log(f"{new_cause}: the model without it has every measured resonance and the split does not reach "
+                     "the noise: refused", progress)
                 failed.append({"cause": new_cause, "cost": best.cost,
-                               "reason": "no measured resonance missing from the model without it"})
+                               "reason": "no measured resonance missing from the model without it, and the fit with "
+                                         "it stays above the noise"})
                 pool.pop(new_cause)
                 continue
             try:
@@ -369,6 +382,41 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
 
 
 # ============================================================================== fitting causes
+#: Baseline fits: local fits from the given values and from this many starts around them.
+BASELINE_STARTS = 4
+#: Spread of those starts: standard deviation of the log of each value (0.3: about 30 %).
+BASELINE_SPREAD = 0.3
+
+
+def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: float = BASELINE_SPREAD,
+                   max_nfev: int = 200) -> FitResult:
+    """The baseline's values fitted from the given values and from ``starts`` random starts around them.
+
+    A local fit from the design values alone can end in a poor optimum of
+    the baseline (one value driven to a bound while the others compensate),
+    and every cause would then seem to explain the data. The starts are
+    drawn with a fixed seed (a diagnosis is repeatable), screened in one
+    batch, and the local fit is run from each; the best result is kept.
+
+    Parameters
+    ----------
+    fit : FrequencyFit
+        The baseline (no effects).
+    starts : int
+        Random starts besides the given values.
+    spread : float
+        Standard deviation of the log-scale perturbation of every value.
+    max_nfev : int
+        Evaluations per local fit.
+    """
+    rng = np.random.default_rng(20260101)
+    lo, hi = fit.bounds()
+    x0 = fit.start_vectors()[0]
+    X = np.vstack([x0, x0 + spread * rng.standard_normal((starts, x0.size))])
+    X = np.clip(X, lo + 1e-9, hi - 1e-9)
+    return fit.fit(x0s=X, grid=False, keep_starts=starts + 1, max_nfev=max_nfev)
+
+
 def _effect_starts(ctx: _Context, fit: FrequencyFit, effect: Effect) -> list[dict[str, float]] | None:
     if isinstance(effect, CoreLoss):
         return effect.starts(fit.circuit, fit.circuit.resolve(check=False), ctx.scale, float(ctx.f[0]), float(ctx.f[-1]))
@@ -377,25 +425,43 @@ def _effect_starts(ctx: _Context, fit: FrequencyFit, effect: Effect) -> list[dic
 
 def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top: int = 2
                ) -> tuple[FitResult | None, list[Effect]]:
-    """Every form and group of ``cause``: effect-only fits from the start grids, then the best ``top`` in full."""
+    """Every form and group of ``cause``: effect-only fits from the start grids, then the best in full.
+
+    The effect-only fits start from the fitted baseline's values and, when
+    the baseline was given (a netlist or a built-in model), from its nominal
+    values too: a baseline fitted without the effect has absorbed it into
+    distorted values, a local minimum the full fit seldom leaves, while the
+    design values are free of it. The best ``top`` of the first pool and the
+    best of the second are fitted in full.
+    """
     circuit = base.fitted_circuit()
     groups = winding_groups(circuit, configuration_ports(ctx.configs), group_names(ctx.configs))
     variants = effect_variants(cause, groups, circuit, float(ctx.f[0]), ctx.one_port, ctx.scale, float(ctx.f[-1]))
-    screened = []
-    for eff in variants:
-        fit = ctx.fit(circuit, [eff])
-        pre = fit.fit([_effect_starts(ctx, fit, eff)], circuit_free=False, max_nfev=40, keep_starts=2)
-        screened.append((pre.cost, eff, fit, pre))
-    screened.sort(key=lambda t: t[0])
+    pools: list[list[tuple[float, Effect, FrequencyFit, FitResult]]] = []
+    for start in [circuit] + ([ctx.nominal] if ctx.nominal is not None and not base.effects else []):
+        screened = []
+        for eff in variants:
+            try:
+                fit = ctx.fit(start, [eff])
+                pre = fit.fit([_effect_starts(ctx, fit, eff)], circuit_free=False, max_nfev=40, keep_starts=2)
+            except _CANDIDATE_FAILURES:
+                continue
+            screened.append((pre.cost, eff, fit, pre))
+        screened.sort(key=lambda t: t[0])
+        pools.append(screened)
     best = None
-    for i, (cost, eff, fit, pre) in enumerate(screened[:top]):
-        if i and best.cost < must_beat and cost > 2 * screened[0][0]:
-            break  # a clearly worse variant is not refined
-        res = fit.fit([_effect_starts(ctx, fit, eff)], x0s=pre.x[None], keep_starts=1, must_beat=must_beat,
-                      max_nfev=50, tol=1e-6)
-        if best is None or res.cost < best.cost:
-            best = res
-    return best, [t[1] for t in screened]
+    for n_pool, screened in enumerate(pools):
+        for i, (cost, eff, fit, pre) in enumerate(screened[:top if n_pool == 0 else 1]):
+            if i and best.cost < must_beat and cost > 2 * screened[0][0]:
+                break  # a clearly worse variant is not refined
+            try:
+                res = fit.fit([_effect_starts(ctx, fit, eff)], x0s=pre.x[None], keep_starts=1, must_beat=must_beat,
+                              max_nfev=50, tol=1e-6)
+            except _CANDIDATE_FAILURES:
+                continue
+            if best is None or res.cost < best.cost:
+                best = res
+    return best, [t[1] for t in pools[0]]
 
 
 #: What a candidate's fit may raise when its parameters make the network degenerate (e.g. a node left with
@@ -443,7 +509,8 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.cause = "+".join(res.causes)
         if best is None or res.cost < best.cost:
             best = res
-    if not effects and ctx.nominal is not None and missing_modes(ctx.f, ctx.data, base.predicted) > 0:
+    if not effects and ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor
+                                                     or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
         found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
         if found is not None and (best is None or found[0].cost < best.cost):
             best, um = found
