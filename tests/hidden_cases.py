@@ -91,9 +91,9 @@ class HiddenCase:
     port: str = ""
     baseline_model: str = ""
     truth: dict = field(default_factory=dict)
-    #: Constant-valued networks kept for labelling (:mod:`detectability`): ``sections`` (the truth's sections
-    #: without its frequency-dependent effects), ``baseline`` and ``merged`` (the baseline before and without
-    #: its jitter).
+    #: Networks kept for labelling (:mod:`detectability`): ``truth`` (with its frequency-dependent effects),
+    #: ``sections`` (the truth's sections without them), ``baseline`` and ``merged`` (the baseline before and
+    #: without its jitter).
     nets: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -228,6 +228,7 @@ def one_port_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003
         f_b = float(10 ** rng.uniform(4.5, 6))
         truth_net.add("Rcore_hidden", "n1", "0", core_resistance(kind, r_hf, f_b))
         truth["core"] = {"kind": kind, "r_hf": r_hf, "f_b": f_b}
+    nets["truth"] = truth_net
     z = rs.impedance(truth_net, "n1", f)
     return HiddenCase("one-port", causes, seed, noise, f, {"Zin": _noisy(z, noise, rng)},
                       baseline_netlist=rs.to_spice(base_net, f"{n}-section cascade (baseline)"), port="n1", truth=truth,
@@ -317,6 +318,7 @@ def two_winding_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.
         f_b = float(10 ** rng.uniform(1.5, 2.7))
         net.set("Rc", core_resistance(kind, r_hf, f_b))
         truth["core"] = {"kind": kind, "r_hf": r_hf, "f_b": f_b}
+    nets["truth"] = net
     data = rs.two_winding_responses(net, f)
     return HiddenCase("two-winding", causes, seed, noise, f, {k: _noisy(v, noise, rng) for k, v in data.items()},
                       baseline_model="hv-4section", truth=truth, nets=nets)

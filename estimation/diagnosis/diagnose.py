@@ -3,19 +3,23 @@
 Steps:
 
 1. The baseline (a built-in model, a netlist, or a lumped R-L-C fitted to
-   one-port data) is fitted to the data.
+   one-port data) is fitted to the data, from its values and from random
+   starts around them (:func:`fit_multistart`). A baseline that fits to the
+   noise floor ends the diagnosis: ``none``, nothing else is fitted.
 2. Every cause of the catalogue (:mod:`.catalogue`: each in the thesis's
-   form and in a causal form, per winding group; :mod:`.sections`: a missing
+   form and in causal forms, per winding group; :mod:`.sections`: a missing
    section, split or added at either end of every winding) is fitted together
-   with the baseline's values. A fit that ends at or above the baseline
+   with the baseline's values, starting from the fitted baseline and from
+   the baseline's nominal values. A fit that ends at or above the baseline
    cost has failed: it is retried from further starts, and when none beats
    the baseline it is reported as failed, never as a candidate. A candidate
    whose circuit values, with the effect removed, fit better than the
    baseline improves the baseline itself (so no gain comes from a better
    optimum of the baseline). When the measurement shows a resonance the
-   fitted baseline lacks, a missing section is also sought from the nominal
-   circuit as two whole sections seeded at the measured resonances
-   (:mod:`.unmerge`); its two sections merged back refit the baseline.
+   fitted baseline lacks, or the baseline stays far above the noise, a
+   missing section is also sought from the nominal circuit as two whole
+   sections seeded at the measured resonances (:mod:`.unmerge`); its two
+   sections merged back refit the baseline.
 3. Forward selection: the cause with the lowest Bayesian information
    criterion ``BIC = N ln(RSS/N) + k ln N`` is named if it beats the
    baseline's BIC by ``min_delta_bic`` (10: "very strong" evidence on Kass and
@@ -25,7 +29,8 @@ Steps:
    ``min_step_gain`` of the remaining cost. A structural cause (a missing
    section) must also remove that share of the cost on held-out points
    (:mod:`.holdout`), and one found from the nominal circuit only while a
-   measured resonance is still missing from the model. Selection stops when the cost
+   measured resonance is still missing from the model or when it brings the
+   fit to the noise floor. Selection stops when the cost
    reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`).
 4. What is still above the noise after the last step is reported by band
    (:func:`.evidence.unexplained_bands`).
@@ -253,7 +258,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                       starts[best_i].configurations, family=("lumped",))
         _log(f"no baseline given: lumped R-L-C fitted (cost {baseline.cost:.4g})", progress)
     else:
-        baseline = fit_multistart(FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed))
+        baseline = fit_multistart(FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed),
+                                  good_enough=NOISE_MARGIN * noise_floor(f, data)["cost"])
         _log(f"baseline {model.name} fitted: cost {baseline.cost:.4g} in {baseline.wall_s:.1f} s", progress)
     worst = max(float(np.sqrt(np.mean(np.abs(e) ** 2))) for e in baseline.errors.values())
     if worst > MAX_BASELINE_RMS:
@@ -389,14 +395,15 @@ BASELINE_SPREAD = 0.3
 
 
 def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: float = BASELINE_SPREAD,
-                   max_nfev: int = 200) -> FitResult:
-    """The baseline's values fitted from the given values and from ``starts`` random starts around them.
+                   max_nfev: int = 200, good_enough: float = 0.0) -> FitResult:
+    """The baseline's values fitted from the given values and, unless that fit is good enough, from random starts.
 
     A local fit from the design values alone can end in a poor optimum of
     the baseline (one value driven to a bound while the others compensate),
-    and every cause would then seem to explain the data. The starts are
-    drawn with a fixed seed (a diagnosis is repeatable), screened in one
-    batch, and the local fit is run from each; the best result is kept.
+    and every cause would then seem to explain the data. The random starts
+    are drawn with a fixed seed (a diagnosis is repeatable) around the given
+    values; each gets a short local fit, and the best of them a full one
+    when it beats the fit from the given values.
 
     Parameters
     ----------
@@ -407,14 +414,24 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     spread : float
         Standard deviation of the log-scale perturbation of every value.
     max_nfev : int
-        Evaluations per local fit.
+        Evaluations of the full local fits (a fifth of them for the short ones).
+    good_enough : float
+        Cost at which the fit from the given values is kept without trying
+        the random starts (the noise floor).
     """
+    first = fit.fit(max_nfev=max_nfev)
+    if first.cost <= good_enough or starts <= 0:
+        return first
     rng = np.random.default_rng(20260101)
     lo, hi = fit.bounds()
     x0 = fit.start_vectors()[0]
-    X = np.vstack([x0, x0 + spread * rng.standard_normal((starts, x0.size))])
-    X = np.clip(X, lo + 1e-9, hi - 1e-9)
-    return fit.fit(x0s=X, grid=False, keep_starts=starts + 1, max_nfev=max_nfev)
+    X = np.clip(x0 + spread * rng.standard_normal((starts, x0.size)), lo + 1e-9, hi - 1e-9)
+    short = fit.fit(x0s=X, grid=False, keep_starts=starts, max_nfev=max(10, max_nfev // 5))
+    if short.cost >= first.cost:
+        return first
+    best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)
+    best.wall_s += first.wall_s + short.wall_s
+    return best
 
 
 def _effect_starts(ctx: _Context, fit: FrequencyFit, effect: Effect) -> list[dict[str, float]] | None:
