@@ -218,10 +218,10 @@ def main() -> None:
     alarms = [r for r in results if r["true"] == "none" and r["named"] != "none"]
     print(f"false alarms on clean data: {len(alarms)}/{sum(r['true'] == 'none' for r in results)}")
     print(f"all cases named right: {sum(r['true'] == r['named'] for r in results)}/{len(results)}")
-    fair = [r for r in results if _detectable(r)]
-    print(f"named right, undetectable cases left out: {sum(r['true'] == r['named'] for r in fair)}/"
-          f"{len(fair)} (undetectable: the baseline's structure, fitted to the truth without noise by the "
-          "reference solver, is within the noise; tests/detectability.py)")
+    print(f"named right, counting only the detectable causes: {sum(_expected(r) == r['named'] for r in results)}/"
+          f"{len(results)} (a cause is undetectable when the baseline's structure, fitted to the truth without "
+          "noise by the reference solver, is within the noise, tests/detectability.py: an undetectable single "
+          "cause is expected as none, an undetectable missing section of a compound case is left out)")
     for kind in ("one-port", "two-winding"):
         w = [r["wall_s"] for r in results if r["kind"] == kind]
         if w:
@@ -235,6 +235,14 @@ def main() -> None:
         print(f"one Jacobian's worth of responses ({len(model_rows())} responses): fast path {s['fast_batch_s'] * 1e3:.0f} ms, "
               f"dense per-frequency solve {s['dense_batch_s'] * 1e3:.0f} ms (ratio "
               f"{s['dense_batch_s'] / s['fast_batch_s']:.1f}x), agreement {s['fast_vs_dense_max_rel']:.1e}")
+
+
+def _expected(r: dict) -> str:
+    """The causes a diagnosis can be expected to name: the true ones without an undetectable one."""
+    if _detectable(r):
+        return r["true"]
+    rest = [c for c in r["true"].split("+") if c != "missing-section" and "+" in r["true"]]
+    return "+".join(sorted(rest)) or "none"
 
 
 def _detectable(r: dict) -> bool:

@@ -491,10 +491,9 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     """Every split and end addition: the new elements fitted alone first, the best ``top`` then in full.
 
     With ``effects`` (causes already named) their fitted parameters start
-    every fit and stay free. Without them, and when the measurement has a
-    resonance the fitted baseline lacks, the sections split from the nominal
-    circuit (:func:`.unmerge.search_unmerged`) are tried too (not with effects:
-    its seeded fits cost too much time once effects are in the model).
+    every fit and stay free. When the measurement has a resonance the fitted
+    model lacks, or the model stays far above the noise, the sections split
+    from the nominal circuit (:func:`.unmerge.search_unmerged`) are tried too.
     """
     circuit = base.fitted_circuit()
     ports = configuration_ports(ctx.configs)
@@ -526,8 +525,8 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.cause = "+".join(res.causes)
         if best is None or res.cost < best.cost:
             best = res
-    if not effects and ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor
-                                                     or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
+    if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor
+                                    or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
         found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
         if found is not None and (best is None or found[0].cost < best.cost):
             best, um = found
