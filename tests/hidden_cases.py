@@ -9,9 +9,9 @@ written in forms and parametrisations other than the catalogue's:
   its own scale, ``R_dc [1 + ((f - f_1) / f_2)^b]`` above ``f_1``;
 - core loss: ``R_hf / (1 + f_b / f)`` (thesis (2.4) rearranged) or an
   eddy-current lamination ``R_hf sqrt(j f/f_e) tanh(sqrt(j f/f_e))`` ...;
-- magnetising inductance: a relaxing permeability ``(1 + j f / f_m)^-beta``
-  (causal) or ``(f / f_r)^-beta`` (thesis (2.5) rearranged) on the winding
-  inductances;
+- magnetising inductance: a Cole-Cole permeability
+  ``r + (1 - r) / (1 + (j f / f_m)^alpha)`` (causal) or ``(f / f_r)^-beta``
+  (thesis (2.5) rearranged) on the winding inductances;
 - missing section: the true winding has one more section than the baseline
   (one-port: two adjacent sections of the truth merged in the baseline;
   two-winding: one section of the truth split in two).
@@ -132,8 +132,11 @@ def core_resistance(kind: str, r_hf: float, f_b: float) -> callable:
 
 
 def permeability(kind: str, f_m: float, beta: float) -> callable:
-    if kind == "relax":
-        return lambda f: (1 + 1j * np.asarray(f) / f_m) ** (-beta)
+    """``L(f) / L_dc``: a Cole-Cole relaxation (``relax``) or thesis (2.5) rearranged (``power``)."""
+    if kind == "relax":  # mu_inf/mu_s = 1 - 4 beta, spread alpha from the decade of f_m
+        ratio = 1 - 4 * beta
+        alpha = 0.6 + 0.3 * (np.log10(f_m) % 1)
+        return lambda f: ratio + (1 - ratio) / (1 + (1j * np.asarray(f) / f_m) ** alpha)
     if kind == "power":
         return lambda f: (np.asarray(f) / f_m) ** (-beta) + 0j
     raise ValueError(kind)

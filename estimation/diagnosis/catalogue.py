@@ -3,9 +3,9 @@
 Every cause comes in the thesis's form, exactly as printed (real-valued
 element values, :mod:`pris_cosim.freqdep`), and in causal forms (complex
 impedances that a passive network can realise): a constant-phase (power-law)
-form, and for the winding effects a relaxation form with a corner frequency
-below which the element keeps its low-frequency value (a power law holds
-only far above a material's or a conductor's corner). All forms name the
+form, and for the skin effect a relaxation form with a corner frequency
+below which the resistance keeps its low-frequency value (a power law holds
+only far above the corner, where the skin depth is below the conductor's size). All forms name the
 same cause; the diagnosis fits them and keeps the best. With several
 windings each cause is tried per winding group (``lv`` only, ``hv`` only,
 ``all``).
@@ -19,18 +19,14 @@ windings each cause is tried per winding group (``lv`` only, ``hv`` only,
     about ``f_c`` (skin depth comparable with the conductor), then the
     power law; ``a = 1, b = 1/2`` is close to a round wire's Bessel impedance.
 ``core-loss``
-    thesis (2.4): ``R_c(f) = a f / (f + b)``; causal: ``a x / (1 + x)``,
-    ``x = (j f/b)^alpha`` (``alpha = 1``: ``a`` in parallel with
-    ``a / (2 pi b)`` H; below 1 the spread corner of eddy currents in
-    laminations). A circuit without a core-loss resistor (one in parallel
-    with an inductor) gets one at the port.
+    thesis (2.4): ``R_c(f) = a f / (f + b)``; causal: ``a (j f/b) / (1 + j f/b)``
+    (``a`` in parallel with ``a / (2 pi b)`` H). A circuit without a core-loss
+    resistor (one in parallel with an inductor) gets one at the port.
 ``magnetising-inductance``
     thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = f_ref^b``: ``a`` and
     ``L_linear`` are not separable, so ``L(f_ref) = L_linear``); causal:
-    ``L (j f/f_ref)^(-b)``; relaxation (a Davidson-Cole permeability):
-    ``L (1 + j f/f_m)^(-b)``, the initial permeability up to about ``f_m``.
-    Applied to the winding inductances with their mutuals (``M_ij`` scales
-    with ``sqrt(L_i L_j)``).
+    ``L (j f/f_ref)^(-b)``. Applied to the winding inductances with their
+    mutuals (``M_ij`` scales with ``sqrt(L_i L_j)``).
 ``stray-capacitance``
     one-port data: a lossy fixture capacitance across the port, the causal
     constant-phase admittance ``Y = w0 C (j f/f0)^alpha`` (``alpha = 1`` an
@@ -281,9 +277,6 @@ class CoreLoss(Effect):
             ExtraParameter("a", 1e-3, 1e12, (1e6,), description="a_Ro: high-frequency core-loss resistance, Ohm"),
             ExtraParameter("b", 1e-3, 1e12, (1e3,), description="b_Ro: corner frequency, Hz"),
         ]
-        if self.form != "thesis":
-            self.parameters.append(ExtraParameter("alpha", 0.3, 1.0, (1.0, 0.6), log=False,
-                                                  description="spread of the corner (1: one R-L corner)"))
 
     def resistor(self, circuit: Circuit, groups: Groups) -> str:
         return core_loss_resistor(circuit) or "Rcore"
@@ -310,16 +303,13 @@ class CoreLoss(Effect):
         base = float(values[rc.lower()]) if rc and rc != "Rcore" else 30 * scale
         fmid = float(np.sqrt(fmin * fmax))
         starts = [{"a": base * m, "b": fmid * g} for m in (1.0, 10.0) for g in (0.01, 0.1, 1.0, 10.0)]
-        starts = starts + [{"a": 1e11, "b": fmid}]  # effectively no core loss: never worse than the baseline
-        if self.form == "thesis":
-            return starts
-        return [{**x, "alpha": al} for al in (1.0, 0.6) for x in starts]
+        return starts + [{"a": 1e11, "b": fmid}]  # effectively no core loss: never worse than the baseline
 
     def resistance(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
         """``R_c(f)`` (P, F), complex for the causal form."""
         if self.form == "thesis":
             return core_loss_resistance(f[None, :], _p(p, "a"), _p(p, "b")).astype(complex)
-        x = (1j * f[None, :] / _p(p, "b")) ** _p(p, "alpha")
+        x = 1j * f[None, :] / _p(p, "b")
         return _p(p, "a") * x / (1 + x)
 
     def branch_changes(self, circuit, groups, values, f, p):
@@ -330,8 +320,7 @@ class CoreLoss(Effect):
     def formula(self, p):
         if self.form == "thesis":
             return f"R_c(f) = a f / (f + b) (thesis 2.4), a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz"
-        return (f"Z_c(f) = a x / (1 + x), x = (j f/b)^alpha, a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz, "
-                f"alpha = {p['alpha']:.4g}")
+        return f"Z_c(f) = a (j f/b) / (1 + j f/b), a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz"
 
     def realise(self, circuit, groups, p, fmin, fmax):
         name = self.resistor(circuit, groups)
@@ -339,13 +328,9 @@ class CoreLoss(Effect):
             lad = fit_resistance(lambda x: core_loss_resistance(x, p["a"], p["b"]), fmin, fmax, 10)
             note = ("a real-valued R_c(f) has no causal realisation: the ladder follows its resistance and adds its "
                     "own reactance")
-        elif p["alpha"] > 1 - 1e-6:
-            lad = FosterRL(0.0, 0.0, np.array([p["a"]]), np.array([p["a"] / (2 * np.pi * p["b"])]))
-            note = "Z_c(f) realised exactly by a in parallel with a / (2 pi b)"
         else:
-            pp = {k: np.array([v]) for k, v in p.items()}
-            lad = fit_impedance(lambda x: self.resistance(np.atleast_1d(x), pp)[0], fmin, fmax, 10)
-            note = "Z_c(f) realised by a passive R-L ladder (its spread corner by several R-L corners)"
+            lad = FosterRL(0.0, 0.0, np.array([p["a"]]), np.array([p["a"] / (2 * np.pi * p["b"])]))
+            note = "R_c(f) realised exactly by a in parallel with a / (2 pi b)"
         return replace_with_ladder(_numeric(circuit, name), name, lad), note
 
 
@@ -356,13 +341,6 @@ class MagnetisingInductance(Effect):
         self.cause = "magnetising-inductance"
         self.thesis_eq = "2.5"
         lo = 0.0 if self.form == "thesis" else 1e-4
-        if self.form == "relaxation":
-            f_lo, f_hi = _corner_range(self)
-            self.parameters = [ExtraParameter("b", 1e-4, 0.6, (0.02, 0.05, 0.1), log=False,
-                                              description="high-frequency exponent"),
-                               ExtraParameter("fm", f_lo, f_hi, _corner_starts(self),
-                                              description="relaxation frequency, Hz")]
-            return
         self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
                                           description="b_Lo: exponent")]
 
@@ -385,8 +363,6 @@ class MagnetisingInductance(Effect):
         if self.form == "thesis":
             b = _p(p, "b")
             return magnetising_inductance(f[None, :], 1.0, self.f_ref ** b, b).astype(complex)
-        if self.form == "relaxation":
-            return (1 + 1j * f[None, :] / _p(p, "fm")) ** (-_p(p, "b"))
         return (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
 
     def branch_changes(self, circuit, groups, values, f, p):
@@ -409,8 +385,6 @@ class MagnetisingInductance(Effect):
         if self.form == "thesis":
             return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
                     f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
-        if self.form == "relaxation":
-            return f"Z_L(f) = j w L (1 + j f/f_m)^(-b), b = {p['b']:.4g}, f_m = {p['fm']:.4g} Hz"
         return f"Z_L(f) = j w L (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}"
 
     def realise(self, circuit, groups, p, fmin, fmax):
@@ -530,7 +504,7 @@ def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, 
     for form in ("thesis", "causal", "relaxation"):
         if cause == "skin-effect":
             out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
-        elif cause == "magnetising-inductance":
+        elif cause == "magnetising-inductance" and form != "relaxation":
             out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
         elif cause == "core-loss" and form != "relaxation":
             out.append(CoreLoss(form=form, group="all", f_ref=f_ref, f_max=f_max))

@@ -440,7 +440,7 @@ def _effect_starts(ctx: _Context, fit: FrequencyFit, effect: Effect) -> list[dic
     return None
 
 
-def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top: int = 2
+def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top: int = 3
                ) -> tuple[FitResult | None, list[Effect]]:
     """Every form and group of ``cause``: effect-only fits from the start grids, then the best in full.
 
@@ -640,7 +640,7 @@ def _extend(ctx: _Context, current: FitResult, cause: str, single: FitResult, va
     if cause == "missing-section":
         return _fit_missing_section(ctx, current, current.effects, must_beat=current.cost)
     circuit = current.fitted_circuit()
-    order = [single.effects[0]] + [v for v in variants if v.label != single.effects[0].label][:1]
+    order = [single.effects[0]] + [v for v in variants if v.label != single.effects[0].label][:2]
     cur_tail = list(current.x[current_nc(current):])
     best = None
     for eff in order:
