@@ -414,7 +414,7 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     spread : float
         Standard deviation of the log-scale perturbation of every value.
     max_nfev : int
-        Evaluations of the full local fits (a fifth of them for the short ones).
+        Evaluations of the full local fits (half of them for the short ones).
     good_enough : float
         Cost at which the fit from the given values is kept without trying
         the random starts (the noise floor).
@@ -426,7 +426,7 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     lo, hi = fit.bounds()
     x0 = fit.start_vectors()[0]
     X = np.clip(x0 + spread * rng.standard_normal((starts, x0.size)), lo + 1e-9, hi - 1e-9)
-    short = fit.fit(x0s=X, grid=False, keep_starts=starts, max_nfev=max(10, max_nfev // 5))
+    short = fit.fit(x0s=X, grid=False, keep_starts=starts, max_nfev=max(10, max_nfev // 2))
     if short.cost >= first.cost:
         return first
     best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)
@@ -440,22 +440,27 @@ def _effect_starts(ctx: _Context, fit: FrequencyFit, effect: Effect) -> list[dic
     return None
 
 
-def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top: int = 3
-               ) -> tuple[FitResult | None, list[Effect]]:
+def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top: int = 2,
+               from_nominal: bool = True) -> tuple[FitResult | None, list[Effect]]:
     """Every form and group of ``cause``: effect-only fits from the start grids, then the best in full.
 
     The effect-only fits start from the fitted baseline's values and, when
     the baseline was given (a netlist or a built-in model), from its nominal
     values too: a baseline fitted without the effect has absorbed it into
     distorted values, a local minimum the full fit seldom leaves, while the
-    design values are free of it. The best ``top`` of the first pool and the
+    design values are free of it. The best ``top`` of the first pool and
+    (unless those reach the noise floor, or ``from_nominal`` is false) the
     best of the second are fitted in full.
     """
     circuit = base.fitted_circuit()
     groups = winding_groups(circuit, configuration_ports(ctx.configs), group_names(ctx.configs))
     variants = effect_variants(cause, groups, circuit, float(ctx.f[0]), ctx.one_port, ctx.scale, float(ctx.f[-1]))
     pools: list[list[tuple[float, Effect, FrequencyFit, FitResult]]] = []
-    for start in [circuit] + ([ctx.nominal] if ctx.nominal is not None and not base.effects else []):
+    best = None
+    for start in [circuit] + ([ctx.nominal] if ctx.nominal is not None and not base.effects and from_nominal
+                              else []):
+        if pools and best is not None and best.cost <= NOISE_MARGIN * ctx.floor:
+            break  # explained to the noise from the fitted baseline: the design values are not needed
         screened = []
         for eff in variants:
             try:
@@ -466,14 +471,12 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
             screened.append((pre.cost, eff, fit, pre))
         screened.sort(key=lambda t: t[0])
         pools.append(screened)
-    best = None
-    for n_pool, screened in enumerate(pools):
-        for i, (cost, eff, fit, pre) in enumerate(screened[:top if n_pool == 0 else 1]):
-            if i and best.cost < must_beat and cost > 2 * screened[0][0]:
+        for i, (cost, eff, fit, pre) in enumerate(screened[:top if len(pools) == 1 else 1]):
+            if i and best is not None and best.cost < must_beat and cost > 2 * screened[0][0]:
                 break  # a clearly worse variant is not refined
             try:
                 res = fit.fit([_effect_starts(ctx, fit, eff)], x0s=pre.x[None], keep_starts=1, must_beat=must_beat,
-                              max_nfev=50, tol=1e-6)
+                              max_nfev=50 if len(pools) == 1 else 30, tol=1e-6)
             except _CANDIDATE_FAILURES:
                 continue
             if best is None or res.cost < best.cost:
@@ -577,7 +580,9 @@ def _single_causes(ctx: _Context, todo: Sequence[str], baseline: FitResult, prog
         if cause == "missing-section":
             res = _fit_missing_section(ctx, baseline, [], must_beat=baseline.cost)
         else:
-            res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.cost)
+            # once a cause explains the data to the noise, the others are fitted from the fitted baseline only
+            explained = any(r.cost <= NOISE_MARGIN * ctx.floor for r in results.values())
+            res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.cost, from_nominal=not explained)
             variants_tried[cause] = variants
         if res is None:
             continue
