@@ -5,10 +5,10 @@ element values, :mod:`pris_cosim.freqdep`), and in causal forms (complex
 impedances that a passive network can realise): a constant-phase (power-law)
 form, and for the skin effect a relaxation form with a corner frequency
 below which the resistance keeps its low-frequency value (a power law holds
-only far above the corner, where the skin depth is below the conductor's size). All forms name the
-same cause; the diagnosis fits them and keeps the best. With several
-windings each cause is tried per winding group (``lv`` only, ``hv`` only,
-``all``).
+only far above the corner, where the skin depth is below the conductor's
+size). All forms name the same cause; the diagnosis fits them and keeps the
+best. With several windings each cause is tried per winding group (``lv``
+only, ``hv`` only, ``all``).
 
 ``skin-effect``
     thesis (2.6): ``R(f) = R_linear / c [1 + a (f/f0 - 1)^b]`` for
@@ -178,15 +178,19 @@ class Effect:
         return circuit, ""
 
 
+def _band_top(e: Effect) -> float:
+    """Highest frequency of the data (four decades above ``f_ref`` when not given), Hz."""
+    return e.f_max if e.f_max > e.f_ref else 1e4 * e.f_ref
+
+
 def _corner_range(e: Effect) -> tuple[float, float]:
     """Bounds of a relaxation form's corner frequency: a decade and a half beyond the data on either side, Hz."""
-    hi = e.f_max if e.f_max > e.f_ref else 1e4 * e.f_ref
-    return e.f_ref / 30, hi * 30
+    return e.f_ref / 30, _band_top(e) * 30
 
 
 def _corner_starts(e: Effect) -> tuple[float, ...]:
     """Starting corner frequencies: near the bottom, the middle and the top of the data's band, Hz."""
-    hi = e.f_max if e.f_max > e.f_ref else 1e4 * e.f_ref
+    hi = _band_top(e)
     return (3 * e.f_ref, float(np.sqrt(e.f_ref * hi)), hi / 3)
 
 

@@ -245,11 +245,13 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         raise DiagnosisError(f"unknown cause {unknown[0]!r} (known: {', '.join(FREQUENCY_CAUSES)})")
     fixed = tuple(model.fixed) if model is not None else ()
     impedance_scale = float(np.median([np.median(np.abs(v)) for k, v in data.items() if k.startswith("Z")] or [1.0]))
-    # ---- baseline
     if model is None:
         if len(data) != 1:
             raise DiagnosisError(f"no baseline given: one-port data expected, got responses {', '.join(data)}")
         data = {"Zin": next(iter(data.values()))}
+    floor = noise_floor(f, data)
+    # ---- baseline
+    if model is None:
         starts = lumped_from_data(f, data["Zin"])
         fits = [FrequencyFit(m.circuit, list(m.configurations.values()), f, data).fit() for m in starts]
         best_i = int(np.argmin([r.cost for r in fits]))
@@ -259,7 +261,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         _log(f"no baseline given: lumped R-L-C fitted (cost {baseline.cost:.4g})", progress)
     else:
         baseline = fit_multistart(FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed),
-                                  good_enough=NOISE_MARGIN * noise_floor(f, data)["cost"])
+                                  good_enough=NOISE_MARGIN * floor["cost"])
         _log(f"baseline {model.name} fitted: cost {baseline.cost:.4g} in {baseline.wall_s:.1f} s", progress)
     worst = max(float(np.sqrt(np.mean(np.abs(e) ** 2))) for e in baseline.errors.values())
     if worst > MAX_BASELINE_RMS:
@@ -271,7 +273,6 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     one_port = len(configs) == 1 and all(r.node is None for r in configs[0].responses)
     ctx = _Context(f, data, configs, fixed, impedance_scale, one_port, progress,
                    nominal=model.circuit if model.family != ("lumped",) else None)
-    floor = noise_floor(f, data)
     ctx.floor = floor["cost"]
     _log(f"noise floor {floor['cost']:.3g} (noise RMS "
          + ", ".join(f"{k} {100 * v:.2g} %" for k, v in floor["per_response"].items()) + ")", progress)
@@ -280,9 +281,10 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # baseline adopts them and every cause is fitted again from it (at most twice)
     # (each cause keeps its best fit over the passes; no second pass once a cause reaches the noise floor)
     results, failed, variants_tried = {}, [], {}
-    if baseline.cost <= NOISE_MARGIN * floor["cost"]:
+    passes = 3 if baseline.cost > NOISE_MARGIN * floor["cost"] else 0
+    if not passes:
         _log("the baseline fits to the noise floor: no cause is fitted", progress)
-    for attempt in range(3 if baseline.cost > NOISE_MARGIN * floor["cost"] else 0):
+    for attempt in range(passes):
         res_i, failed_i, variants_i = _single_causes(ctx, todo, baseline, progress)
         for cause, r in res_i.items():
             if cause not in results or r.cost < results[cause].cost:
