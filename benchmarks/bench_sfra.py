@@ -29,7 +29,7 @@ from estimation.sfra.faults import diagnose_sweep  # noqa: E402
 from estimation.sfra.fingerprint import load_or_fit  # noqa: E402
 from estimation.sfra.sweep import load_sweep  # noqa: E402
 
-DEFAULT = ROOT / "tests" / "data" / "ipn_winding_interturn"
+DEFAULT = ROOT / "pris_cosim" / "data" / "real" / "ipn_winding_interturn"
 #: Position NN -> first shorted tap (from the data's README).
 TAPS = {1: 3, 3: 15, 5: 27, 7: 39, 9: 51, 11: 63, 13: 75, 15: 87}
 

@@ -1,4 +1,4 @@
-"""Shared fixtures: paths to the reference material beside the checkout, ngspice availability."""
+"""Shared fixtures: paths to the shipped reference data, ngspice availability."""
 
 from __future__ import annotations
 
@@ -7,16 +7,14 @@ from pathlib import Path
 import pytest
 
 from pris_cosim import ngspice
+from pris_cosim.datafiles import NETLISTS, REAL  # noqa: F401  (REAL: for the tests that import it)
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
-NETLISTS = SHARED / "netlists"
 
 
 @pytest.fixture(scope="session")
 def netlist_dir() -> Path:
-    if not NETLISTS.is_dir():
-        pytest.skip(f"reference netlists not found at {NETLISTS}")
+    """The thesis's circuits as ngspice netlists, shipped in ``pris_cosim/data/netlists``."""
     return NETLISTS
 
 

@@ -31,7 +31,6 @@ from scipy.special import jv
 
 import refsolver as rs
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 SINGLE = ("none", "skin-effect", "core-loss", "magnetising-inductance", "missing-section")
 COMPOUND = (("skin-effect", "core-loss"), ("skin-effect", "magnetising-inductance"),
             ("skin-effect", "missing-section"), ("core-loss", "magnetising-inductance"),

@@ -16,14 +16,14 @@ from pris_cosim.measured import read_multisegment_csv
 from pris_cosim.models import get_model
 from pris_cosim.netlist import parse_netlist
 
-from conftest import SHARED
+from conftest import REAL as REAL_DIR
 from hidden_cases import one_port_case
 
-REAL = SHARED / "data" / "real" / "small_transformer_3_loads.csv"
+REAL = REAL_DIR / "small_transformer_3_loads.csv"
+
+
 @pytest.fixture(scope="module")
 def real_short():
-    if not REAL.exists():
-        pytest.skip(f"real data not found at {REAL}")
     return read_multisegment_csv(REAL, "short")
 
 
@@ -43,8 +43,6 @@ def test_real_short_circuit_is_skin_effect(real_short, tmp_path):
 
 
 def test_cli_real_open_segment_report(tmp_path):
-    if not REAL.exists():
-        pytest.skip("real data missing")
     proc = subprocess.run([sys.executable, "-m", "pris_cosim", "diagnose", "--measured", str(REAL), "--segment", "open",
                            "--report", str(tmp_path / "open"), "--json"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from pris_cosim import measured as M
+from pris_cosim.datafiles import REAL
 from pris_cosim.measured import (
     MeasuredDataError,
     MeasuredResponses,
@@ -36,10 +37,6 @@ from pris_cosim.measured import (
 )
 
 DATA = Path(__file__).resolve().parent / "data" / "measured"
-REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
-needs_real = pytest.mark.skipif(
-    not REAL.is_dir(), reason=f"real measured data folder {REAL} is absent"
-)
 
 RTOL = 1e-15
 
@@ -498,7 +495,6 @@ def test_write_keeps_permissions(tmp_path):
 # ---------------------------------------------------------------------------
 
 
-@needs_real
 def test_real_small_transformer_segments():
     p = REAL / "small_transformer_3_loads.csv"
     labels = list_segments(p)
@@ -524,7 +520,6 @@ def test_real_small_transformer_segments():
     assert np.min(np.abs(segs["49.5R"].mag("Zin") - 49.5)) < 1.0
 
 
-@needs_real
 def test_real_03pk10_admittance():
     d = load_measured(REAL / "distribution_transformer_admittance_03PK10.txt")
     assert d.names == ["Yin"]
@@ -545,7 +540,6 @@ def test_real_03pk10_admittance():
     assert abs(f[np.argmax(mag)] - 0.925e6) <= 25e3
 
 
-@needs_real
 def test_real_e4990a_rx():
     d = load_measured(REAL / "coil_E4990A_R_X.csv")
     f, z = d.frequency_hz, d.response("Zin")
@@ -562,7 +556,6 @@ def test_real_e4990a_rx():
     assert any("E4990A" in c for c in d.comments)
 
 
-@needs_real
 def test_real_e4990a_mag_phase_consistent():
     a = load_measured(REAL / "coil_E4990A_R_X.csv")
     b = load_measured(REAL / "coil_E4990A_mag_phase.csv")
@@ -579,7 +572,6 @@ def test_real_e4990a_mag_phase_consistent():
     assert rb == pytest.approx(ra, rel=0.1)
 
 
-@needs_real
 def test_real_detect_formats():
     assert detect_format(REAL / "small_transformer_3_loads.csv") == "multisegment_csv"
     assert detect_format(REAL / "distribution_transformer_admittance_03PK10.txt") == "mag_phase_rows"

@@ -12,9 +12,9 @@ from estimation import real_fits as rf
 from estimation.studies import real_data
 from pris_cosim.frf import ResponseModel
 from pris_cosim.measured import MeasuredDataError, MeasuredResponses
+from pris_cosim.datafiles import REAL
 from pris_cosim.netlist import format_netlist, parse_netlist
 
-REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 SMALL = REAL / rf.SMALL_FILE
 ADMITTANCE = REAL / rf.ADMITTANCE_FILE
 
@@ -32,8 +32,7 @@ def _noisy(h: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 
 def _need(path: Path) -> Path:
-    if not path.is_file():
-        pytest.skip(f"real data not found at {path}")
+    assert path.is_file(), f"shipped data missing: {path}"
     return path
 
 

@@ -17,11 +17,12 @@ from estimation.sfra.fingerprint import load_or_fit, model_y
 from estimation.sfra.indices import band_indices
 from estimation.sfra.sweep import Sweep, load_sweep
 from estimation.sfra.winding import admittance
+from pris_cosim.datafiles import REAL
 from pris_cosim.measured import MeasuredDataError
 from pris_cosim.touchstone import read_touchstone, write_touchstone
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(__file__).resolve().parent / "data" / "ipn_winding_interturn"
+DATA = REAL / "ipn_winding_interturn"
 REFERENCE = DATA / "reference_23072517.s2p"
 #: Position NN -> first shorted tap (README of the data).
 TAPS = {1: 3, 3: 15, 5: 27, 7: 39, 9: 51, 11: 63, 13: 75, 15: 87}

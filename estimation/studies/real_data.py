@@ -12,8 +12,8 @@ Fits, in order:
 The answer (also ``<out>/study.json``) has one row per fitted case and
 model, a text table, the short-circuit resistance comparison and
 ``checks`` against stated bounds.  The data directory defaults to
-``shared/data/real`` beside the checkout and is overridden by the
-environment variable ``PRIS_COSIM_REAL_DATA``.
+the real measurements shipped with the package (``pris_cosim/data/real``)
+and is overridden by the environment variable ``PRIS_COSIM_REAL_DATA``.
 """
 
 from __future__ import annotations
@@ -22,6 +22,8 @@ import os
 import time
 from pathlib import Path
 from typing import Any
+
+from pris_cosim.datafiles import REAL
 
 from .. import real_fits as rf
 from . import common
@@ -43,9 +45,9 @@ GLOBAL_EVALS = 1500
 
 
 def data_dir() -> Path:
-    """Directory of the real data: ``$PRIS_COSIM_REAL_DATA`` or ``shared/data/real`` beside the checkout."""
+    """Directory of the real data: ``$PRIS_COSIM_REAL_DATA`` or the shipped ``pris_cosim/data/real``."""
     env = os.environ.get(ENV_VAR)
-    return Path(env) if env else Path(__file__).resolve().parents[3] / "shared" / "data" / "real"
+    return Path(env) if env else REAL
 
 
 def _require_data(folder: Path) -> tuple[Path, Path]:
