@@ -36,6 +36,7 @@ from test_estimate_defaults import draw_target, target_responses, write_response
 from estimation import cli  # noqa: E402
 from estimation.estimate import default_band  # noqa: E402
 from pris_cosim.models import get_model  # noqa: E402
+import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 MODELS = ["two-section", "three-section", "cascade-4", "hv-4section", "hv-4section-cab2a", "hv-4section-cab2b",
           "hv-6section-passive"]
@@ -89,6 +90,12 @@ def main() -> None:
         print(f"{r['model']:22s} {r['parameters']:6d} {r['within_tolerance']:>7d}/{r['targets']:<2d} "
               f"{r['converged_and_within']:>8d}/{r['targets']:<2d} {r['right_or_says_so']:>13d}/{r['targets']:<2d} "
               f"{r['median_wall_s']:9.1f}")
+    results_io.write_results("bench_estimate_defaults", summary=__doc__.splitlines()[0], tables=[results_io.table(
+        f"Default estimates on {args.targets} random targets per model (spread x{args.spread}, tolerance {args.tolerance} %)",
+        ["model", "parameters", "within tolerance", "converged and within", "right or says it is not", "median wall (s)"],
+        [[r["model"], r["parameters"], f"{r['within_tolerance']}/{r['targets']}",
+          f"{r['converged_and_within']}/{r['targets']}", f"{r['right_or_says_so']}/{r['targets']}",
+          r["median_wall_s"]] for r in results])])
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
 

@@ -26,6 +26,7 @@ import numpy as np
 from estimation import approaches as ap
 from estimation.parameters import ParameterSet
 from pris_cosim.models import get_model
+import results_io  # noqa: E402  (benchmarks/: results as JSON)
 ap.CHUNK_BYTES = int(sys.argv[1])
 P = int(sys.argv[2])
 model = get_model("three-section")
@@ -69,6 +70,8 @@ def main() -> None:
             print(f"{name:36s} failed: {r['error']}")
         else:
             print(f"{name:36s} {r['evals_per_s']:8.1f} evaluations/s  peak {r['peak_mib']:7.0f} MiB")
+    results_io.write_raw("bench_estimation_memory", {"population": args.population, "samples": 409_501, "rows": rows},
+                         summary=__doc__.splitlines()[0])
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"population": args.population, "samples": 409_501, "rows": rows}, fh, indent=1)

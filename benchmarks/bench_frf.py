@@ -27,6 +27,7 @@ from pris_cosim import ngspice  # noqa: E402
 from pris_cosim.errors import NonPassiveWarning  # noqa: E402
 from pris_cosim.frf import ResponseModel, logspace_hz  # noqa: E402
 from pris_cosim.models import get_model  # noqa: E402
+import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 
 def main() -> None:
@@ -94,6 +95,7 @@ def main() -> None:
                       single_set_fast_s=t_one)
     else:
         print("ngspice not installed: skipped")
+    results_io.write_raw("bench_frf", result, summary=__doc__.splitlines()[0])
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(result, fh, indent=1)

@@ -25,6 +25,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 import test_fuzz_cases as fc  # noqa: E402
+import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 
 def run_reader(name: str, count: int, seed: int, tmp: Path, per_command: dict | None = None) -> fc.Tally:
@@ -158,6 +159,10 @@ def main() -> int:
                                                 "examples": sub.examples}
                 print(f"{'':>19}{command}: {sub.total} inputs, {sub.counts.get('ok', 0)} ok, "
                       f"{sub.counts.get('rejected', 0)} rejected, {sub.failures} failures", file=sys.stderr, flush=True)
+    results_io.write_results("bench_fuzz", summary=__doc__.splitlines()[0], tables=[results_io.table(
+        f"Fuzzed inputs per reader and command (seed {args.seed})", ["reader / command", "inputs", "ok", "rejected", "failures"],
+        [[k, r["inputs"], r["counts"].get("ok", 0), r["counts"].get("rejected", 0), r["failures"]]
+         for k, r in results.items()])])
     if args.json:
         print(json.dumps(results))
     return 0

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation.studies import hv_transformer as hv
+import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 
 def per_eval_ms(data: str, case: str, P: int = 100) -> float:
@@ -88,6 +89,7 @@ def main() -> None:
               f"load average {load0[0]:.2f} before, {load1[0]:.2f} after; thesis: dozens of hours per run, "
               f"so >= {thesis_h * 3600 / wall:.0f}x", flush=True)
         print(full["table"], flush=True)
+    results_io.write_raw("bench_hv_transformer", figures, summary=__doc__.splitlines()[0])
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=1) + "\n")
     print(json.dumps({k: v for k, v in figures.items() if k.endswith("wall_s")}), file=sys.stderr)

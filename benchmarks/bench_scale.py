@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 
 def rc_chain(elements: int) -> str:
@@ -73,6 +74,7 @@ def main() -> None:
     args = ap.parse_args()
     sizes = sorted(int(x) for x in args.sizes.split(","))
     print(f"{'circuit':>10} {'elements':>9} {'unknowns':>9} {'wall s':>8} {'peak MiB':>9} {'max rel err':>12}")
+    rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for kind, build in (("rc-chain", rc_chain), ("rlc-ladder", rlc_ladder)):
             for size in sizes:
@@ -87,7 +89,12 @@ def main() -> None:
                     ref = rc_reference(size, f)
                     err = f"{np.max(np.abs(z - ref) / np.abs(ref)):.2e}"
                 print(f"{kind:>10} {size:>9} {unknowns:>9} {wall:8.2f} {peak:9.0f} {err:>12}", flush=True)
+                rows.append([kind, size, unknowns, wall, peak, err or "-"])
     print("wall s: the whole command (start-up, reading, solve, JSON); peak MiB: resident set of that process")
+    results_io.write_results("bench_scale", summary=__doc__.splitlines()[0], tables=[results_io.table(
+        f"`pris-cosim frf --json` at {args.points} frequencies; wall: the whole command; peak: its resident set",
+        ["circuit", "elements", "unknowns", "wall (s)", "peak (MiB)", "max relative error vs continued fraction"],
+        rows)])
 
 
 if __name__ == "__main__":

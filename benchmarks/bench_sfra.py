@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT))
 from estimation.sfra.faults import diagnose_sweep  # noqa: E402
 from estimation.sfra.fingerprint import load_or_fit  # noqa: E402
 from estimation.sfra.sweep import load_sweep  # noqa: E402
+import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 DEFAULT = ROOT / "pris_cosim" / "data" / "real" / "ipn_winding_interturn"
 #: Position NN -> first shorted tap (from the data's README).
@@ -47,7 +48,7 @@ def main() -> int:
     t_fit = time.perf_counter() - t
     print(f"reference: N = {fp.n_sections}, rms {fp.rms:.3f}, fit {fp.fit_seconds:.1f} s "
           f"({'cached, load ' + format(t_fit, '.2f') + ' s' if fp.cached else 'fitted now'})")
-    out, named, kinds, walls = {}, 0, 0, []
+    out, named, kinds, walls, rows = {}, 0, 0, [], []
     for kind, pattern in (("bolted", "bolted/230725{:02d}.s2p"), ("resistive", "resistive/23{:02d}.s2p")):
         taps, locs = [], []
         for nn, tap in TAPS.items():
@@ -75,6 +76,8 @@ def main() -> int:
                   f"gain {diag.gain:.3f}  side margin {margin:7.0f}  {wall:.1f} s", flush=True)
             taps.append(tap)
             locs.append(frac)
+            rows.append([kind, p.name, f"{tap}-{tap + 2}", diag.cause, loc["section"] if loc else "-", frac,
+                         sev.get("kind", "-"), diag.gain, wall])
         ok = np.isfinite(locs)
         rho = spearmanr(np.asarray(taps)[ok], np.asarray(locs)[ok])[0] if ok.sum() > 2 else float("nan")
         out[kind] = rho
@@ -84,6 +87,14 @@ def main() -> int:
           + ", ".join(f"{k} {v:+.3f}" for k, v in out.items())
           + f", per sweep {min(walls):.1f}-{max(walls):.1f} s (reference model "
           + ("cached)" if fp.cached else "fitted in this run)"))
+    results_io.write_results("bench_sfra", summary=__doc__.splitlines()[0], tables=[
+        results_io.table(f"Per sweep (reference model: {fp.n_sections} sections, rms {fp.rms:.3f}, "
+                         + ("cached" if fp.cached else f"fitted in {fp.fit_seconds:.0f} s") + ")",
+                         ["kind", "file", "taps", "cause", "section", "location (fraction)", "kind named", "gain",
+                          "wall (s)"], rows),
+        results_io.table("Summary", ["sweeps", "named shorted-turns", "kinds right", "Spearman bolted",
+                                     "Spearman resistive", "slowest sweep (s)"],
+                         [[n, named, kinds, out.get("bolted"), out.get("resistive"), max(walls)]])])
     return 0
 
 

@@ -30,6 +30,7 @@ from estimation import approaches as ap
 from estimation.studies import three_section as three
 from estimation.studies import two_section as two
 from pris_cosim.models import get_model
+import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 
 def per_eval(a: ap.Approach, P: int, repeats: int = 2, seed: int = 0) -> float:
@@ -83,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"quick two-section study: {wall:.1f} s wall; thesis {thesis_min} min of runs -> "
               f"{out['speedup_total']:.0f}x", file=sys.stderr)
     text = json.dumps(out, indent=1)
+    results_io.write_raw("bench_studies", out, summary=__doc__.splitlines()[0])
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
             fh.write(text + "\n")

@@ -42,6 +42,7 @@ from pris_cosim import ngspice
 from pris_cosim import timedomain as td
 from pris_cosim.arrangement import SourceSettings
 from pris_cosim.models import get_model
+import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 #: Runs a command and prints its wall time and the peak resident memory of the command (KiB).
 _MEASURE = (
@@ -181,6 +182,9 @@ def main(argv: list[str] | None = None) -> int:
     for name, r in e2e.items():
         r["ngspice_ratio"] = t_ref / r["wall_s"]
         print(f"{name:28s} {r['wall_s']:9.3f} {r['peak_mib']:9.0f} {r['ngspice_ratio']:10.1f}")
+    results_io.write_raw("bench_timedomain", {"case": {"prbs_order": args.order, "fs_hz": args.fs, "samples": n},
+                                              "engines": rows, "end_to_end": e2e, "reference": ref_name},
+                         summary=__doc__.splitlines()[0])
     if args.json:
         Path(args.json).write_text(json.dumps({"case": {"prbs_order": args.order, "fs_hz": args.fs, "samples": n},
                                                "engines": rows, "end_to_end": e2e, "reference": ref_name},

@@ -20,6 +20,7 @@ import time
 
 from pris_cosim import virtual_lab as vl
 from pris_cosim.models import get_model
+import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,6 +59,7 @@ def main(argv: list[str] | None = None) -> int:
             paths += vl.plot_record(noisy.records[("LVSC", "high")], args.plots, stem=f"virtual_lab_{mode}_lvsc_high")
             print("   plots: " + ", ".join(str(p) for p in paths))
         sys.stdout.flush()
+    results_io.write_raw("bench_virtual_lab", report, summary=__doc__.splitlines()[0])
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
             json.dump(report, fh, indent=2)

@@ -8,7 +8,9 @@ no measured figure is typed by hand.  A result file holds
 - ``summary``: one line for the figures page;
 - ``tables``: a list of ``{"title", "columns", "rows"}`` (rows are lists of
   cells: numbers or text), rendered as Markdown tables in that order;
-- ``figures``: optional ``{name: {"value", "unit"}}`` of headline numbers.
+- ``figures``: optional ``{name: {"value", "unit"}}`` of headline numbers;
+- ``data``: optional free-form result (nested dicts and lists), rendered as
+  a flattened key/value table when a benchmark has no tables of its own.
 """
 
 from __future__ import annotations
@@ -75,8 +77,32 @@ def write_results(name: str, tables: Sequence[dict[str, Any]], summary: str = ""
     return out
 
 
+def write_raw(name: str, data: Any, summary: str = "") -> Path:
+    """Write a benchmark's free-form result (nested dicts/lists of numbers and text).
+
+    Parameters
+    ----------
+    name : str
+        Benchmark name; the file is ``benchmarks/results/<name>.json``.
+    data : object
+        The result as the benchmark builds it; ``docs/figures.md`` shows it
+        flattened (``a.b.c = value``).
+    summary : str, optional
+        One line describing what was measured.
+    """
+    out = write_results(name, tables=[], summary=summary)
+    doc = json.loads(out.read_text())
+    doc["data"] = json.loads(json.dumps(data, default=_plain))
+    tmp = out.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(doc, indent=1) + "\n")
+    tmp.replace(out)
+    return out
+
+
 def _plain(x: Any) -> Any:
     """JSON form of numpy scalars and arrays."""
     if hasattr(x, "tolist"):
         return x.tolist()
+    if isinstance(x, Path):
+        return str(x)
     raise TypeError(f"not JSON serialisable: {type(x).__name__}")
