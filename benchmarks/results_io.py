@@ -4,7 +4,8 @@
 no measured figure is typed by hand.  A result file holds
 
 - ``benchmark``: the script's name; ``command``: how it was run;
-- ``date`` (UTC, ISO 8601), ``machine`` (cores, platform, Python);
+- ``date`` (UTC, ISO 8601), ``machine`` (cores, platform, Python, the 1-minute
+  load average when the result was written: figures under load are slower);
 - ``summary``: one line for the figures page;
 - ``tables``: a list of ``{"title", "columns", "rows"}`` (rows are lists of
   cells: numbers or text), rendered as Markdown tables in that order;
@@ -66,7 +67,8 @@ def write_results(name: str, tables: Sequence[dict[str, Any]], summary: str = ""
         "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
         "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
         "machine": {"cores": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version()},
+                    "python": platform.python_version(),
+                    "load_average_1min": round(os.getloadavg()[0], 2)},
         "summary": summary,
         "tables": list(tables),
         "figures": figures or {},

@@ -65,8 +65,11 @@ def render(doc: dict[str, Any], source: str) -> list[str]:
     lines = [f"## {doc.get('benchmark', source)}", ""]
     if doc.get("summary"):
         lines += [doc["summary"], ""]
+    load = m.get("load_average_1min")
     lines += [f"Run `{doc.get('command', '')}` on {doc.get('date', '?')} ({m.get('cores', '?')} cores, "
-              f"Python {m.get('python', '?')}); result file `{source}`.", ""]
+              f"Python {m.get('python', '?')}"
+              + (f", load average {load:g} when written" if load is not None else "")
+              + f"); result file `{source}`.", ""]
     for t in doc.get("tables", []):
         lines += render_table(t)
     if doc.get("figures"):
