@@ -139,6 +139,7 @@ def test_smallest_config_time_within_1pct():
     assert out["converged"] is True
 
 
+@pytest.mark.slow
 def test_port_only_record_names_what_it_cannot_determine(tmp_path):
     """Zin alone with all seven values free: equivalent circuits exist; the verdict says so, exit 0, one warning.
 
@@ -184,6 +185,7 @@ def test_reference_solver_agrees_with_thesis_values():
     assert np.abs(z) == pytest.approx([10686.02, 319612.3, 3185.12], rel=1e-6)
 
 
+@pytest.mark.slow
 def test_two_section_ten_independent_targets(tmp_path):
     """Ten random windings, responses from the nodal solver above; ``estimate`` with its defaults.
 
@@ -240,6 +242,7 @@ def _ten_targets(name: str, tmp_path, points: int, budget: dict | None = None) -
     return rows
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["three-section", "cascade-4"])
 def test_one_port_models_ten_independent_targets(name, tmp_path):
     """Ten random windings per one-port model, ``Zin`` from the nodal solver above, ``estimate`` with its defaults.
@@ -258,6 +261,7 @@ def test_one_port_models_ten_independent_targets(name, tmp_path):
 
 @pytest.mark.parametrize("name", ["hv-4section", "hv-4section-cab2a", "hv-4section-cab2b", "hv-6section",
                                   "hv-6section-passive", "hv-6section-freqdep"])
+@pytest.mark.slow
 def test_two_winding_models_ten_targets_say_so(name, tmp_path):
     """Ten random targets per two-winding model (33-43 parameters), six responses from the nodal solver above.
 
