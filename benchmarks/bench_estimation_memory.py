@@ -20,13 +20,14 @@ import subprocess
 import sys
 import time
 
+import results_io  # benchmarks/: results as JSON
+
 CHILD = r"""
 import os, sys, time, resource, json
 import numpy as np
 from estimation import approaches as ap
 from estimation.parameters import ParameterSet
 from pris_cosim.models import get_model
-import results_io  # noqa: E402  (benchmarks/: results as JSON)
 ap.CHUNK_BYTES = int(sys.argv[1])
 P = int(sys.argv[2])
 model = get_model("three-section")
