@@ -154,6 +154,7 @@ def quick_study(tmp_path_factory):
     return out, json.loads(buf.getvalue())
 
 
+@pytest.mark.slow
 def test_quick_study_rows(quick_study):
     out, d = quick_study
     rows = {r["case"]: r for r in d["rows"]}
@@ -172,6 +173,7 @@ def test_quick_study_rows(quick_study):
     assert read_response_csv(out / "measured.csv").responses.keys() >= set(hv.RESPONSES)
 
 
+@pytest.mark.slow
 def test_quick_study_resumes_without_rerunning(quick_study, capsys):
     out, d = quick_study
     assert main(["study", "hv-transformer", "--quick", "--json", "--out", str(out)]) == 0
@@ -180,6 +182,7 @@ def test_quick_study_resumes_without_rerunning(quick_study, capsys):
     assert again["wall_s"] < 60
 
 
+@pytest.mark.slow
 def test_study_on_measured_csv(tmp_path, capsys):
     """A user's own six responses (here analytic, of the Case 1 structure) through --measured, one case."""
     f = np.logspace(1, 5, 161)

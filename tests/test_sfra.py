@@ -61,6 +61,7 @@ def diagnoses(reference, fingerprint):
 # ---------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_fingerprint_fits_the_reference(reference, fingerprint):
     assert 3 <= fingerprint.n_sections <= 12
     assert fingerprint.rms < 6.0  # weighted rms, 1 = noise + model floor
@@ -73,6 +74,7 @@ def test_fingerprint_fits_the_reference(reference, fingerprint):
     assert 10 < fingerprint.model.total_inductance() < 100
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", list(KINDS))
 def test_every_short_is_named_shorted_turns(diagnoses, kind):
     for nn in TAPS:
@@ -82,6 +84,7 @@ def test_every_short_is_named_shorted_turns(diagnoses, kind):
         assert all(c.gain > 0 for c in d.candidates)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", list(KINDS))
 def test_located_positions_follow_the_taps(diagnoses, kind):
     taps = [TAPS[nn] for nn in TAPS]
@@ -91,6 +94,7 @@ def test_located_positions_follow_the_taps(diagnoses, kind):
     assert abs(rho) >= 0.8, (kind, locs)
 
 
+@pytest.mark.slow
 def test_locations_agree_between_kinds(diagnoses):
     """A bolted short and a 10-Ohm short at the same taps are placed within two sections of each other."""
     for nn in TAPS:
@@ -98,6 +102,7 @@ def test_locations_agree_between_kinds(diagnoses):
         assert abs(a["fraction"] - b["fraction"]) <= 2.0 / a["of_sections"], (nn, a, b)
 
 
+@pytest.mark.slow
 def test_bolted_and_resistive_shorts_differ_in_resistance(diagnoses):
     for nn in TAPS:
         rb = diagnoses["bolted", nn].severity()["fault_resistance_ohm"]
@@ -105,6 +110,7 @@ def test_bolted_and_resistive_shorts_differ_in_resistance(diagnoses):
         assert rr > rb, nn
 
 
+@pytest.mark.slow
 def test_reference_against_itself_with_noise_is_none(reference, fingerprint):
     rng = np.random.default_rng(11)
     s = reference.noise
@@ -128,6 +134,7 @@ def _cli(*argv: str, env_cache: str | None = None) -> subprocess.CompletedProces
                           capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_cli_json_and_report(tmp_path, fingerprint):
     # the module fixture has filled the cache, so this run does not refit
     rep = tmp_path / "rep"
@@ -256,6 +263,7 @@ def test_touchstone_reads_s_y_z_in_every_format(tmp_path, param, fmt):
     np.testing.assert_allclose(ts.network.s, s, rtol=1e-9, atol=1e-12)  # the skrf.Network
 
 
+@pytest.mark.slow
 def test_fitted_model_round_trips_through_touchstone(tmp_path, reference, fingerprint):
     f = reference.frequency_hz
     y = admittance(fingerprint.model, f)
@@ -272,6 +280,7 @@ def test_fitted_model_round_trips_through_touchstone(tmp_path, reference, finger
         np.testing.assert_allclose(back.y, model_y(fingerprint.model, f), rtol=1e-8)
 
 
+@pytest.mark.slow
 def test_cli_writes_the_fault_model(tmp_path, fingerprint):
     p = tmp_path / "fault_model.s2p"
     out = _cli("--measured", str(DATA / "resistive" / "2309.s2p"), "--reference", str(REFERENCE), "--quiet",

@@ -17,6 +17,7 @@ from estimation.studies import two_section as two
 from pris_cosim.models import get_model
 
 
+@pytest.mark.slow
 def test_two_section_quick_study_meets_the_acceptance_numbers(tmp_path):
     """Cases 2, 3 within 1 %; case 1 reports L1, L2 as not identifiable; case 5 R < 10 %, the rest < 2 %."""
     out = tmp_path / "two"
