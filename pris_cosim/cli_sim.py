@@ -320,9 +320,9 @@ def cmd_build_fmu(args: argparse.Namespace) -> int:
     name = _base_name(args)
     same_prbs = case and settings and (settings.prbs_order, settings.fclk) == (case.settings.prbs_order,
                                                                                case.settings.fclk)
-    experiment = case.experiment if same_prbs else None
+    experiment = case.fmu_experiment if same_prbs else None
     paths = build_pris_fmus(circuit, port, args.out, settings, shorts, name=name, experiment=experiment,
-                            dut_experiment=case.experiment if case else None, fmi_version=args.fmi_version)
+                            dut_experiment=case.fmu_experiment if case else None, fmi_version=args.fmi_version)
     fmus = [str(p) for p in paths.values()]
     if args.json:
         _emit({"fmus": fmus})

@@ -458,14 +458,53 @@ def _dependencies(mna: MNA, values: Mapping[str, float], outputs: Sequence[tuple
     return out, der
 
 
+def whole_ns_step(step: float, fclk: float, stop: float | None = None) -> float:
+    """The largest step up to ``step`` that is a whole number of nanoseconds and divides the PRBS bit.
+
+    Masters on an integer nanosecond clock (libcosim) then hit every PRBS
+    clock instant, and the FMU's switching instants fall on communication
+    points as before. Without such a step (a bit that is not a whole number
+    of nanoseconds, or ``stop`` not a whole number of steps) ``step`` is
+    returned unchanged.
+
+    Parameters
+    ----------
+    step : float, s
+    fclk : float, Hz
+        PRBS clock.
+    stop : float, s, optional
+        Stop time that must stay a whole number of steps.
+
+    Returns
+    -------
+    float, s
+    """
+    bit_ns = 1e9 / float(fclk)
+    if abs(bit_ns - round(bit_ns)) > 1e-6 * bit_ns or round(bit_ns) < 1:
+        return float(step)
+    bit = int(round(bit_ns))
+    stop_ns = None if stop is None else float(stop) * 1e9
+    for k in range(max(1, math.ceil(bit / (float(step) * 1e9) - 1e-9)), bit + 1):
+        if bit % k:
+            continue
+        h = bit // k
+        if stop_ns is not None and abs(stop_ns / h - round(stop_ns / h)) > 1e-6:
+            continue
+        return h / 1e9
+    return float(step)
+
+
 def default_experiment(mna: MNA, values: Mapping[str, float], settings: SourceSettings | None) -> tuple[float, float]:
     """``(stop_time, step_size)`` in s: one PRBS period at 100 steps per bit with a source.
 
-    Without a source: 1000 steps of a tenth of the fastest time constant
-    (from the eigenvalues of the state matrix at the start values).
+    With a source the step is a whole number of nanoseconds where the bit
+    allows it (:func:`whole_ns_step`). Without a source: 1000 steps of a
+    tenth of the fastest time constant (from the eigenvalues of the state
+    matrix at the start values).
     """
     if settings is not None:
-        return (2 ** int(settings.prbs_order) - 1) / settings.fclk, 1.0 / (100.0 * settings.fclk)
+        stop = (2 ** int(settings.prbs_order) - 1) / settings.fclk
+        return stop, whole_ns_step(1.0 / (100.0 * settings.fclk), settings.fclk, stop)
     lam = np.abs(np.linalg.eigvals(mna.state_space(values).A[0]))
     lam = lam[lam > 0]
     step = 0.1 / float(lam.max()) if lam.size else 1e-6
