@@ -233,3 +233,32 @@ def write_ssp(
             zf.writestr(path, text)
     os.replace(tmp, out)
     return out
+
+
+def read_ssd(path: str | os.PathLike[str]) -> str:
+    """The ``SystemStructure.ssd`` text of an ``.ssp`` archive, or of an ``.ssd`` file itself."""
+    path = Path(path)
+    if zipfile.is_zipfile(path):
+        with zipfile.ZipFile(path) as zf:
+            if SSD_NAME not in zf.namelist():
+                raise CircuitError(f"{path.name}: no {SSD_NAME} in the archive")
+            return zf.read(SSD_NAME).decode("utf-8")
+    return path.read_text(encoding="utf-8")
+
+
+def default_experiment(path: str | os.PathLike[str]) -> tuple[float, float]:
+    """``(stop_time, step_size)`` in s of a system written by :func:`write_ssp`.
+
+    Raises
+    ------
+    CircuitError
+        The system has no default experiment, stop time or fixed-step annotation.
+    """
+    from xml.etree import ElementTree
+
+    root = ElementTree.fromstring(read_ssd(path))
+    exp = root.find(f"{{{SSD_NS}}}DefaultExperiment")
+    algo = None if exp is None else exp.find(f".//{{{OSP_NS}}}FixedStepAlgorithm")
+    if exp is None or exp.get("stopTime") is None or algo is None:
+        raise CircuitError(f"{Path(path).name}: no default experiment with stop time and fixed step")
+    return float(exp.get("stopTime")), float(algo.get("baseStepSize") or algo.get("stepSize"))
