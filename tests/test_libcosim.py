@@ -97,21 +97,32 @@ def test_ssp_export_loads_in_libcosim_and_runs_as_the_jacobi_master(tmp_path):
         assert peak_rel(lc[lc_name], jac[name][1:]) < 1e-9, name
     exact = _exact(TWO / "two_section_source.fmu", TWO / "two_section_dut.fmu", 1 / step, n, {"vdc": 10.0})
     assert np.abs(exact["v_bprbs"]).max() == 10.0
-    err = cosim.relative_rms(lc["dut.v_in"], exact["v_in"][1:])
-    # the coupling guidance (fmus/README.md): Jacobi at the default step is tens of percent off on v_in
-    assert 0.05 < err < 0.5
+    # the coupling guidance (fmus/README.md): Jacobi at the default step is 22.8 % off on v_in, 20.6 % on i_in
+    assert 0.18 < cosim.relative_rms(lc["dut.v_in"], exact["v_in"][1:]) < 0.28
+    assert 0.16 < cosim.relative_rms(lc["source.i_in"], exact["i_in"][1:]) < 0.26
 
 
-@pytest.mark.parametrize("folder, base, step_ns, bound", [("two-section", "two_section", 25, 0.01),
-                                                          ("three-section", "three_section", 1, 0.01)])
-def test_libcosim_at_the_guidance_step_is_within_one_percent(tmp_path, folder, base, step_ns, bound):
-    """At the largest step that the coupling guidance gives for 1 % (Jacobi), libcosim running the SSP export
-    is within 1 % RMS of the exact co-simulation on v_in and i_in."""
+def _guidance_check(tmp_path: Path, folder: str, base: str, step_ns: int, bits: int, grid_ns: int) -> None:
     src, dut = ROOT / "fmus" / folder / f"{base}_source.fmu", ROOT / "fmus" / folder / f"{base}_dut.fmu"
-    stop = {"two-section": 2e-3, "three-section": 1e-4}[folder]
+    md = read_model_description(str(src))
+    fclk = next(float(v.start) for v in md.modelVariables if v.name == "fclk")
+    stop = bits / fclk
     path = ssp.write_ssp(src, dut, tmp_path / f"{base}.ssp")
     lc = libcosim(tmp_path, "ssp", str(path), "--stop", repr(stop), "--step-ns", str(step_ns))
-    n = round(stop / (step_ns * 1e-9)) + 1
-    exact = _exact(src, dut, 1e9 / step_ns, n, {})
-    assert cosim.relative_rms(lc["dut.v_in"], exact["v_in"][1:]) < bound
-    assert cosim.relative_rms(lc["source.i_in"], exact["i_in"][1:]) < bound
+    k = grid_ns // step_ns  # compare on a coarser grid, where the exact master is cheap
+    n = round(stop / (grid_ns * 1e-9)) + 1
+    exact = _exact(src, dut, 1e9 / grid_ns, n, {})
+    for lc_name, name in (("dut.v_in", "v_in"), ("source.i_in", "i_in")):
+        assert cosim.relative_rms(lc[lc_name][k - 1::k], exact[name][1:]) < 0.01, name
+
+
+def test_libcosim_at_the_guidance_step_is_within_one_percent_two_section(tmp_path):
+    """At the largest step that the coupling guidance gives for 1 % with a Jacobi master (two-section: 160 ns,
+    50 PRBS bits), libcosim running the SSP export is within 1 % RMS of the exact co-simulation."""
+    _guidance_check(tmp_path, "two-section", "two_section", 160, 50, 1600)
+
+
+@pytest.mark.slow
+def test_libcosim_at_the_guidance_step_is_within_one_percent_three_section(tmp_path):
+    """Three-section: 1 ns over 300 PRBS bits (3 million libcosim steps)."""
+    _guidance_check(tmp_path, "three-section", "three_section", 1, 300, 80)
