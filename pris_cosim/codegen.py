@@ -500,7 +500,8 @@ def default_experiment(mna: MNA, values: Mapping[str, float], settings: SourceSe
     With a source the step is a whole number of nanoseconds where the bit
     allows it (:func:`whole_ns_step`). Without a source: 1000 steps of a
     tenth of the fastest time constant (from the eigenvalues of the state
-    matrix at the start values).
+    matrix at the start values), to two digits, and down to whole
+    nanoseconds from 1 ns up.
     """
     if settings is not None:
         stop = (2 ** int(settings.prbs_order) - 1) / settings.fclk
@@ -509,6 +510,8 @@ def default_experiment(mna: MNA, values: Mapping[str, float], settings: SourceSe
     lam = lam[lam > 0]
     step = 0.1 / float(lam.max()) if lam.size else 1e-6
     step = float(f"{step:.1e}")
+    if 1e-9 <= step < 1e-8:  # on whole nanoseconds (two digits are whole from 10 ns up)
+        step = math.floor(step * 1e9 + 1e-9) / 1e9
     return 1000.0 * step, step
 
 
