@@ -128,7 +128,7 @@ def coupling(bits: int | None, out_tables: list, figures: dict) -> None:
                 figures[key] = {"value": h_ns, "unit": "ns"}
     out_tables.append(table(
         "Coupling error of fixed-step masters against the monolithic FMU (shipped FMI 2.0 FMUs; first "
-        + ", ".join(f"{bits or c[-1]} PRBS bits of {c[0]}" for c in COUPLING_CASES) + ")",
+        + ", ".join(f"{bits or c[-2]} PRBS bits of {c[0]}" for c in COUPLING_CASES) + ")",
         ["case", "step (ns)", "step / fastest period", "master", "v_in error (%)", "i_in error (%)", "wall (s)",
          "wall / monolithic"], rows))
     out_tables.append(table(
