@@ -126,3 +126,28 @@ def test_libcosim_at_the_guidance_step_is_within_one_percent_two_section(tmp_pat
 def test_libcosim_at_the_guidance_step_is_within_one_percent_three_section(tmp_path):
     """Three-section: 1 ns over 300 PRBS bits (3 million libcosim steps)."""
     _guidance_check(tmp_path, "three-section", "three_section", 1, 300, 80)
+
+
+@pytest.mark.parametrize("system", sorted((ROOT / "fmus").glob("*/*.ssp")), ids=lambda p: p.stem)
+def test_shipped_ssp_runs_in_libcosim_at_its_default_step(tmp_path, system):
+    """The shipped systems load as they are, with the step of their default experiment."""
+    stop, step = ssp.default_experiment(system)
+    lc = libcosim(tmp_path, "ssp", str(system), "--stop", repr(200 * step))
+    assert lc["time_s"].size == 200
+    np.testing.assert_allclose(lc["time_s"], np.arange(1, 201) * step, rtol=1e-12)
+    assert np.abs(lc["dut.v_in"]).max() > 0 and np.abs(lc["source.i_in"]).max() > 0
+
+
+def test_fmi3_fmus_are_refused_before_libcosim_sees_them(tmp_path):
+    """libcosimpy ends the process (segmentation fault) when an FMI 3.0 FMU is added: refused with one line."""
+    import zipfile
+
+    fake = tmp_path / "fmi3.fmu"
+    with zipfile.ZipFile(fake, "w") as zf:
+        zf.writestr("modelDescription.xml", '<?xml version="1.0"?><fmiModelDescription fmiVersion="3.0" '
+                                            'modelName="m" instantiationToken="x"/>')
+    proc = subprocess.run([sys.executable, "-m", "pris_cosim.libcosim_run", "fmu", str(fake), "--stop", "1e-6",
+                           "--step-ns", "100", "--out", str(tmp_path / "r.npz")], capture_output=True, text=True,
+                          cwd=ROOT)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == "libcosim_run: error: fmi3.fmu: FMI 3.0 FMU; libcosim runs FMI 2.0 FMUs only"

@@ -110,3 +110,18 @@ def test_build_fmu_writes_the_ssp_beside_the_fmus(tmp_path):
         assert {"resources/three_section_source.fmu", "resources/three_section_dut.fmu",
                 "resources/three_section_source.ssv", "resources/three_section_dut.ssv"} <= set(zf.namelist())
     assert ssp.default_experiment(out["ssp"]) == (pytest.approx(4095 / 100e3), 80e-9)
+
+
+@pytest.mark.parametrize("folder, base", [("two-section", "two_section"), ("three-section", "three_section")])
+def test_shipped_systems_hold_the_shipped_fmus(folder, base):
+    """``fmus/<case>/<name>.ssp`` is current: its FMUs are the ones beside it, its values their start values."""
+    path = ROOT / "fmus" / folder / f"{base}.ssp"
+    with zipfile.ZipFile(path) as zf:
+        for kind in ("source", "dut"):
+            fmu = ROOT / "fmus" / folder / f"{base}_{kind}.fmu"
+            assert zf.read(f"resources/{fmu.name}") == fmu.read_bytes(), fmu.name
+            md = read_model_description(str(fmu))
+            starts = {v.name: float(v.start) for v in md.modelVariables if v.causality == "parameter"}
+            assert _parameter_set(zf, f"resources/{fmu.stem}.ssv") == starts
+    exp = read_model_description(str(ROOT / "fmus" / folder / f"{base}_source.fmu")).defaultExperiment
+    assert ssp.default_experiment(path) == (float(exp.stopTime), float(exp.stepSize))
