@@ -30,6 +30,7 @@ from xml.sax.saxutils import quoteattr
 
 from fmpy.model_description import read_model_description
 
+from . import __version__
 from .errors import CircuitError
 
 SSD_NS = "http://ssp-standard.org/SSP1/SystemStructureDescription"
@@ -131,7 +132,8 @@ def system_structure_xml(name: str, components: Mapping[str, tuple[str, str, lis
         '<?xml version="1.0" encoding="UTF-8"?>',
         f'<ssd:SystemStructureDescription xmlns:ssd="{SSD_NS}" xmlns:ssc="{SSC_NS}" xmlns:ssv="{SSV_NS}"',
         f'    xmlns:osp="{OSP_NS}" version="1.0" name={quoteattr(name)}'
-        + (f" description={quoteattr(description)}" if description else "") + ">",
+        + (f" description={quoteattr(description)}" if description else "")
+        + f' generationTool="pris_cosim {__version__}">',
         f"  <ssd:System name={quoteattr(name)} description=\"PRIS source FMU driving a DUT FMU\">",
         "    <ssd:Elements>",
         *elements,
@@ -225,12 +227,15 @@ def write_ssp(
                                            description="PRIS arrangement: source FMU and DUT FMU")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+    entries: list[tuple[str, bytes]] = [(SSD_NAME, texts.pop(SSD_NAME).encode("utf-8"))]
+    entries += [(comps[comp][0], fmu.read_bytes()) for comp, fmu in (("source", source_fmu), ("dut", dut_fmu))]
+    entries += [(path, text.encode("utf-8")) for path, text in sorted(texts.items())]
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
-        zf.writestr(SSD_NAME, texts.pop(SSD_NAME))
-        for comp, fmu in (("source", source_fmu), ("dut", dut_fmu)):
-            zf.write(fmu, comps[comp][0])
-        for path, text in sorted(texts.items()):
-            zf.writestr(path, text)
+        for path, data in entries:  # fixed timestamps: the same FMUs give the same archive
+            info = zipfile.ZipInfo(path, date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, data)
     os.replace(tmp, out)
     return out
 
