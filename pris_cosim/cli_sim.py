@@ -64,6 +64,9 @@ def register(sub: Any) -> None:
     b.add_argument("--name", help="base name of the FMUs (default: model or netlist name)")
     b.add_argument("--fmi-version", dest="fmi_version", type=int, choices=(2, 3), default=2,
                    help="FMI version of the FMUs (default 2)")
+    b.add_argument("--ssp", action="store_true",
+                   help="also write NAME.ssp: an SSP 1.0 system of the source and DUT FMUs with their connections, "
+                        "parameter values and default experiment (needs --with-source)")
     _source_options(b, required=False)
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_build_fmu)
@@ -308,11 +311,16 @@ def _simulate_cosim(circuit: Circuit, port: str, settings: SourceSettings, short
 
 
 def cmd_build_fmu(args: argparse.Namespace) -> int:
-    """``build-fmu``: write the FMUs (and .mo files); with ``--json`` print ``{"fmus": [paths]}``."""
+    """``build-fmu``: write the FMUs (and .mo files); with ``--json`` print ``{"fmus": [paths]}``.
+
+    With ``--ssp`` also the SSP 1.0 archive of source and DUT (``"ssp": path`` in the JSON).
+    """
     from .fmi import build_pris_fmus
 
     from .thesis_cases import case_for
 
+    if getattr(args, "ssp", False) and not args.with_source:
+        raise ValueError("--ssp needs --with-source (the system couples the source FMU and the DUT FMU)")
     circuit, model = load_circuit(args)
     port, shorts = _port_and_shorts(circuit, model, args)
     case = case_for(model.name, port) if model is not None else None
@@ -320,13 +328,19 @@ def cmd_build_fmu(args: argparse.Namespace) -> int:
     name = _base_name(args)
     same_prbs = case and settings and (settings.prbs_order, settings.fclk) == (case.settings.prbs_order,
                                                                                case.settings.fclk)
-    experiment = case.experiment if same_prbs else None
+    experiment = case.fmu_experiment if same_prbs else None
     paths = build_pris_fmus(circuit, port, args.out, settings, shorts, name=name, experiment=experiment,
-                            dut_experiment=case.experiment if case else None, fmi_version=args.fmi_version)
+                            dut_experiment=case.fmu_experiment if case else None, fmi_version=args.fmi_version)
     fmus = [str(p) for p in paths.values()]
+    ssp = None
+    if getattr(args, "ssp", False):
+        from .ssp import write_ssp
+
+        system = Path(paths["dut"]).stem.removesuffix("_dut")  # the FMUs' identifier base
+        ssp = str(write_ssp(paths["source"], paths["dut"], Path(args.out) / f"{system}.ssp", name=system))
     if args.json:
-        _emit({"fmus": fmus})
+        _emit({"fmus": fmus} | ({"ssp": ssp} if ssp else {}))
     else:
-        for f in fmus:
+        for f in fmus + ([ssp] if ssp else []):
             print(f)
     return 0

@@ -166,6 +166,12 @@ class NetworkModel:
         Per output / state derivative: the state numbers it depends on and
         whether it depends on the FMU input (direct feedthrough), from the
         structure of the state-space form at the start values.
+    output_param_deps, derivative_param_deps : list of list of Variable
+        Per output / state derivative: the parameters its value depends on
+        (for ``InitialUnknowns``), from the state-space form and the ties.
+    calculated_deps : dict
+        Per calculated parameter (Real vr): the parameters its tie uses,
+        directly or through other ties.
     experiment : tuple of float or None
         ``(stop_time, step_size)`` in s of the default experiment.
     """
@@ -186,6 +192,9 @@ class NetworkModel:
     ties: list[str] = field(default_factory=list)
     output_deps: list[tuple[list[int], bool]] = field(default_factory=list)
     derivative_deps: list[tuple[list[int], bool]] = field(default_factory=list)
+    output_param_deps: list[list[Variable]] = field(default_factory=list)
+    derivative_param_deps: list[list[Variable]] = field(default_factory=list)
+    calculated_deps: dict[int, list[Variable]] = field(default_factory=dict)
     experiment: tuple[float, float] | None = None
 
     @property
@@ -370,11 +379,46 @@ def _assemble(
             assert input_var is not None
             input_vrs.append(input_var.vr)
     out_deps, der_deps = _dependencies(mna, values, outputs, input_vrs)
+    out_params, der_params, calc_deps = _parameter_deps(circuit, mna, values, outputs, lay, bridge)
     return NetworkModel(kind=kind, identifier=_identifier(name), circuit=circuit, mna=mna, description=description,
                         port=port, settings=settings, real=lay.real, integer=lay.integer, outputs=outs,
                         input_vrs=input_vrs, bridge_input=bridge, element_vr=slots, ties=ties,
-                        output_deps=out_deps, derivative_deps=der_deps,
+                        output_deps=out_deps, derivative_deps=der_deps, output_param_deps=out_params,
+                        derivative_param_deps=der_params, calculated_deps=calc_deps,
                         experiment=default_experiment(mna, values, settings))
+
+
+def _parameter_deps(circuit: Circuit, mna: MNA, values: Mapping[str, float],
+                    outputs: Sequence[tuple[str, str, str, int, int]], lay: _Layout, bridge: int,
+                    ) -> tuple[list[list[Variable]], list[list[Variable]], dict[int, list[Variable]]]:
+    """The parameters behind every output, state derivative and calculated parameter (see fmu_dependencies)."""
+    from .fmu_dependencies import parameter_dependencies, tie_closure
+
+    by_name = {v.name: v for v in lay.real + lay.integer}
+    params = {p.key: p for p in circuit.parameters}
+    free: list[tuple[str, str]] = []
+    free_vars: list[Variable] = []
+    for p in circuit.parameters:
+        if not isinstance(p.value, Expression):
+            free.append(("parameter", p.key))
+            free_vars.append(by_name[p.name])
+    for e in circuit.of_kind("R", "L", "C", "K"):
+        if not isinstance(e.value, Expression):
+            free.append(("element", e.key))
+            free_vars.append(by_name[e.name if e.key not in params else f"{e.name}_elem"])
+    rows = [index if kind == OUT_NODE else None for _, _, _, kind, index in outputs]
+    der, out, der_bridge, out_bridge = parameter_dependencies(circuit, mna, values, free, rows, bridge)
+    prbs = [by_name[n] for n in ("vdc", "prbs_order", "prbs_seed") if n in by_name]
+
+    def pick(idx: list[int], through_bridge: bool) -> list[Variable]:
+        return [free_vars[j] for j in idx] + (prbs if through_bridge else [])
+
+    out_vars = [pick(out[i], out_bridge[i] or outputs[i][3] == OUT_INPUT) for i in range(len(outputs))]
+    der_vars = [pick(der[i], der_bridge[i]) for i in range(len(der))]
+    closure = tie_closure(circuit)
+    calc = {by_name[p.name].vr: [by_name[params[k].name] for k in sorted(closure[p.key])]
+            for p in circuit.parameters if isinstance(p.value, Expression)}
+    return out_vars, der_vars, calc
 
 
 def _state_nominal(unit: str, settings: SourceSettings | None) -> float:
@@ -414,18 +458,60 @@ def _dependencies(mna: MNA, values: Mapping[str, float], outputs: Sequence[tuple
     return out, der
 
 
+def whole_ns_step(step: float, fclk: float, stop: float | None = None) -> float:
+    """The largest step up to ``step`` that is a whole number of nanoseconds and divides the PRBS bit.
+
+    Masters on an integer nanosecond clock (libcosim) then hit every PRBS
+    clock instant, and the FMU's switching instants fall on communication
+    points as before. Without such a step (a bit that is not a whole number
+    of nanoseconds, or ``stop`` not a whole number of steps) ``step`` is
+    returned unchanged.
+
+    Parameters
+    ----------
+    step : float, s
+    fclk : float, Hz
+        PRBS clock.
+    stop : float, s, optional
+        Stop time that must stay a whole number of steps.
+
+    Returns
+    -------
+    float, s
+    """
+    bit_ns = 1e9 / float(fclk)
+    if abs(bit_ns - round(bit_ns)) > 1e-6 * bit_ns or round(bit_ns) < 1:
+        return float(step)
+    bit = int(round(bit_ns))
+    stop_ns = None if stop is None else float(stop) * 1e9
+    for k in range(max(1, math.ceil(bit / (float(step) * 1e9) - 1e-9)), bit + 1):
+        if bit % k:
+            continue
+        h = bit // k
+        if stop_ns is not None and abs(stop_ns / h - round(stop_ns / h)) > 1e-6:
+            continue
+        return h / 1e9
+    return float(step)
+
+
 def default_experiment(mna: MNA, values: Mapping[str, float], settings: SourceSettings | None) -> tuple[float, float]:
     """``(stop_time, step_size)`` in s: one PRBS period at 100 steps per bit with a source.
 
-    Without a source: 1000 steps of a tenth of the fastest time constant
-    (from the eigenvalues of the state matrix at the start values).
+    With a source the step is a whole number of nanoseconds where the bit
+    allows it (:func:`whole_ns_step`). Without a source: 1000 steps of a
+    tenth of the fastest time constant (from the eigenvalues of the state
+    matrix at the start values), to two digits, and down to whole
+    nanoseconds from 1 ns up.
     """
     if settings is not None:
-        return (2 ** int(settings.prbs_order) - 1) / settings.fclk, 1.0 / (100.0 * settings.fclk)
+        stop = (2 ** int(settings.prbs_order) - 1) / settings.fclk
+        return stop, whole_ns_step(1.0 / (100.0 * settings.fclk), settings.fclk, stop)
     lam = np.abs(np.linalg.eigvals(mna.state_space(values).A[0]))
     lam = lam[lam > 0]
     step = 0.1 / float(lam.max()) if lam.size else 1e-6
     step = float(f"{step:.1e}")
+    if 1e-9 <= step < 1e-8:  # on whole nanoseconds (two digits are whole from 10 ns up)
+        step = math.floor(step * 1e9 + 1e-9) / 1e9
     return 1000.0 * step, step
 
 

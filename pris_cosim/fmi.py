@@ -124,16 +124,31 @@ def model_description(model: NetworkModel, guid: str) -> str:
                    if v.nominal is not None and v.causality == "local" and v.derivative_of is None]
     inputs = [index_of[("Real", v.vr)] for v in model.real if v.causality == "input"]
 
-    def unknown(i: int, deps: tuple[list[int], bool]) -> str:
-        states, feedthrough = deps
-        idx = [state_index[k] for k in states] + (inputs if feedthrough else [])
-        kinds = ["dependent"] * len(idx)
-        return (f'      <Unknown index="{i}" dependencies="{" ".join(map(str, idx))}" '
-                f'dependenciesKind="{" ".join(kinds)}"/>' if idx else f'      <Unknown index="{i}" dependencies=""/>')
+    def unknown(i: int, idx: list[int]) -> str:
+        idx = sorted(set(idx))
+        if not idx:
+            return f'      <Unknown index="{i}" dependencies=""/>'
+        kinds = " ".join(["dependent"] * len(idx))
+        return f'      <Unknown index="{i}" dependencies="{" ".join(map(str, idx))}" dependenciesKind="{kinds}"/>'
 
-    outputs = [unknown(index_of[("Real", o.variable.vr)], d) for o, d in zip(model.outputs, model.output_deps)]
-    derivs = [unknown(index_of[("Real", v.vr)], d)
-              for v, d in zip([v for v in model.real if v.derivative_of is not None], model.derivative_deps)]
+    def run_time(deps: tuple[list[int], bool]) -> list[int]:
+        states, feedthrough = deps
+        return [state_index[k] for k in states] + (inputs if feedthrough else [])
+
+    def params(variables: list[Variable]) -> list[int]:
+        return [index_of[(v.type, v.vr)] for v in variables]
+
+    derivs = [v for v in model.real if v.derivative_of is not None]
+    outputs = [unknown(index_of[("Real", o.variable.vr)], run_time(d)) for o, d in zip(model.outputs, model.output_deps)]
+    derivatives = [unknown(index_of[("Real", v.vr)], run_time(d)) for v, d in zip(derivs, model.derivative_deps)]
+    # initialization: the knowns are the input, the states (initial="exact") and the parameters
+    init_deps: dict[int, list[int]] = {}
+    for o, d, p in zip(model.outputs, model.output_deps, model.output_param_deps):
+        init_deps[index_of[("Real", o.variable.vr)]] = run_time(d) + params(p)
+    for v, d, p in zip(derivs, model.derivative_deps, model.derivative_param_deps):
+        init_deps[index_of[("Real", v.vr)]] = run_time(d) + params(p)
+    for vr, p in model.calculated_deps.items():
+        init_deps[index_of[("Real", vr)]] = params(p)
     initial = sorted(
         index_of[(v.type, v.vr)] for v in exposed
         if v.causality == "calculatedParameter" or (v.initial == "calculated" and v.causality in ("output", "local"))
@@ -182,10 +197,10 @@ def model_description(model: NetworkModel, guid: str) -> str:
         *outputs,
         "    </Outputs>",
         "    <Derivatives>",
-        *derivs,
+        *derivatives,
         "    </Derivatives>",
         "    <InitialUnknowns>",
-        *[f'      <Unknown index="{i}"/>' for i in initial],
+        *[unknown(i, init_deps[i]) for i in initial],
         "    </InitialUnknowns>",
         "  </ModelStructure>",
         "</fmiModelDescription>",

@@ -74,14 +74,27 @@ def model_description3(model: NetworkModel, guid: str, units_xml: str) -> str:
     states = [v for v in model.real if v.nominal is not None and v.causality == "local" and v.derivative_of is None]
     inputs = [v.vr for v in model.real if v.causality == "input"]
 
-    def unknown(tag: str, vr: int, deps: tuple[list[int], bool]) -> str:
-        idx = [states[k].vr for k in deps[0]] + (inputs if deps[1] else [])
+    def unknown(tag: str, vr: int, idx: list[int]) -> str:
+        idx = sorted(set(idx))
         if not idx:
             return f'    <{tag} valueReference="{vr}" dependencies=""/>'
         kinds = " ".join(["dependent"] * len(idx))
         return f'    <{tag} valueReference="{vr}" dependencies="{" ".join(map(str, idx))}" dependenciesKind="{kinds}"/>'
 
+    def run_time(deps: tuple[list[int], bool]) -> list[int]:
+        return [states[k].vr for k in deps[0]] + (inputs if deps[1] else [])
+
+    def params(variables: list[Variable]) -> list[int]:
+        return [value_reference(model, v) for v in variables]
+
     derivs = [v for v in model.real if v.derivative_of is not None]
+    init_deps: dict[int, list[int]] = {}
+    for o, d, p in zip(model.outputs, model.output_deps, model.output_param_deps):
+        init_deps[o.variable.vr] = run_time(d) + params(p)
+    for v, d, p in zip(derivs, model.derivative_deps, model.derivative_param_deps):
+        init_deps[v.vr] = run_time(d) + params(p)
+    for vr, p in model.calculated_deps.items():
+        init_deps[vr] = params(p)
     initial = sorted(
         value_reference(model, v) for v in exposed
         if v.causality == "calculatedParameter" or (v.initial == "calculated" and v.causality in ("output", "local"))
@@ -116,9 +129,9 @@ def model_description3(model: NetworkModel, guid: str, units_xml: str) -> str:
         *[_variable_xml(model, v) for v in exposed],
         "  </ModelVariables>",
         "  <ModelStructure>",
-        *[unknown("Output", o.variable.vr, d) for o, d in zip(model.outputs, model.output_deps)],
-        *[unknown("ContinuousStateDerivative", v.vr, d) for v, d in zip(derivs, model.derivative_deps)],
-        *[f'    <InitialUnknown valueReference="{vr}"/>' for vr in initial],
+        *[unknown("Output", o.variable.vr, run_time(d)) for o, d in zip(model.outputs, model.output_deps)],
+        *[unknown("ContinuousStateDerivative", v.vr, run_time(d)) for v, d in zip(derivs, model.derivative_deps)],
+        *[unknown("InitialUnknown", vr, init_deps[vr]) for vr in initial],
         "  </ModelStructure>",
         "</fmiModelDescription>",
         "",

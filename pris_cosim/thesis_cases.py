@@ -40,7 +40,9 @@ class ThesisCase:
         Thesis section that gives the settings.
     settings : SourceSettings
     fs : float, Hz
-        Sampling frequency of the record (the FMU's default step is ``1/fs``).
+        Sampling frequency of the record (the FMU's default step is ``1/fs``
+        rounded down to whole nanoseconds that divide the PRBS bit, see
+        :attr:`fmu_experiment`).
     duration : float, s
         Record length (the FMU's default stop time).
     """
@@ -55,6 +57,19 @@ class ThesisCase:
     def experiment(self) -> tuple[float, float]:
         """``(stop_time, step_size)`` in s."""
         return self.duration, 1.0 / self.fs
+
+    @property
+    def fmu_experiment(self) -> tuple[float, float]:
+        """``(stop_time, step_size)`` in s of the FMUs' default experiment.
+
+        The step is the largest one up to ``1/fs`` that is a whole number of
+        nanoseconds, divides the PRBS bit and the record (two-section:
+        3125 ns for 3333.3 ns; three-section: 80 ns for 90.9 ns), so that
+        masters with an integer nanosecond clock keep the PRBS timing.
+        """
+        from .codegen import whole_ns_step
+
+        return self.duration, whole_ns_step(1.0 / self.fs, self.settings.fclk, self.duration)
 
 
 def _period(order: int, fclk: float) -> float:

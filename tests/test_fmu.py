@@ -476,8 +476,9 @@ def test_model_description_declares_what_importers_need(fmus):
                 assert v.variability == "tunable", (name, v.name)
         for flag in ("canGetAndSetFMUstate", "canSerializeFMUstate", "providesDirectionalDerivative"):
             assert getattr(md.coSimulation, flag) and getattr(md.modelExchange, flag), (name, flag)
-        for u in md.outputs + md.derivatives:
+        for u in md.outputs + md.derivatives + md.initialUnknowns:
             assert u.dependencies is not None, (name, u.variable.name)
+        assert {u.variable.name for u in md.outputs} <= {u.variable.name for u in md.initialUnknowns}, name
 
 
 def test_output_dependencies_follow_the_state_space_form(fmus):

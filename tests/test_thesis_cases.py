@@ -103,10 +103,21 @@ def test_shipped_fmus_and_modelica_start_from_their_case(folder, base, case):
         for name, want in (("vdc", s.vdc), ("fclk", s.fclk), ("prbs_order", s.prbs_order), ("Rpris", s.rpris),
                            ("Lpris", s.lpris), ("Cpris", s.cpris)):
             assert values[name] == pytest.approx(want, rel=1e-15), (fmu.name, name)
-        assert exp["stopTime"] == pytest.approx(case.duration) and exp["stepSize"] == pytest.approx(1 / case.fs)
+        assert exp["stopTime"] == pytest.approx(case.duration)
+        _assert_whole_ns_step(exp, case)
         text = fmu.with_suffix(".mo").read_text()
         assert f"vdc = {float(s.vdc)!r}" in text and f"fclk = {float(s.fclk)!r}" in text
         assert f"prbs_order = {s.prbs_order}" in text
         assert f"StopTime = {float(case.duration)!r}" in text
     _, exp = _start_values(ROOT / "fmus" / folder / f"{base}_dut.fmu")
-    assert exp["stepSize"] == pytest.approx(1 / case.fs)
+    _assert_whole_ns_step(exp, case)
+
+
+def _assert_whole_ns_step(exp: dict[str, float], case) -> None:
+    """The default step: whole nanoseconds, a divisor of the PRBS bit and of the record, at most 1/fs, within 15 %."""
+    step_ns = exp["stepSize"] * 1e9
+    assert step_ns == pytest.approx(round(step_ns), abs=1e-6)
+    bit_ns = round(1e9 / case.settings.fclk)
+    assert bit_ns % round(step_ns) == 0
+    assert (exp["stopTime"] * 1e9 / round(step_ns)) == pytest.approx(round(exp["stopTime"] * 1e9 / round(step_ns)))
+    assert 0.85 / case.fs <= exp["stepSize"] <= 1 / case.fs

@@ -48,5 +48,5 @@ equation
   v_in = Cg1.p.v;
   v_n2 = C12.n.v;
   v_n3 = C23.n.v;
-  annotation(experiment(StartTime = 0.0, StopTime = 0.04095, Interval = 9.090909090909091e-08));
+  annotation(experiment(StartTime = 0.0, StopTime = 0.04095, Interval = 8e-08));
 end three_section_dut;

@@ -30,5 +30,5 @@ equation
     feedback = mod(mod(div(pre(reg), integer(2^(taps[1] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[2] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[3] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[4] - 1))), 2), 2);
     reg = mod(2 * pre(reg) + feedback, integer(2^prbs_order));
   end when;
-  annotation(experiment(StartTime = 0.0, StopTime = 0.04095, Interval = 9.090909090909091e-08));
+  annotation(experiment(StartTime = 0.0, StopTime = 0.04095, Interval = 8e-08));
 end three_section_source;

@@ -31,5 +31,5 @@ equation
   connect(i_in, Iin.i);
   v_in = C1_1.p.v;
   v_mid = C1_1.n.v;
-  annotation(experiment(StartTime = 0.0, StopTime = 0.3, Interval = 3.3333333333333333e-06));
+  annotation(experiment(StartTime = 0.0, StopTime = 0.3, Interval = 3.125e-06));
 end two_section_dut;

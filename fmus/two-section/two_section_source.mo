@@ -30,5 +30,5 @@ equation
     feedback = mod(mod(div(pre(reg), integer(2^(taps[1] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[2] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[3] - 1))), 2) + mod(div(pre(reg), integer(2^(taps[4] - 1))), 2), 2);
     reg = mod(2 * pre(reg) + feedback, integer(2^prbs_order));
   end when;
-  annotation(experiment(StartTime = 0.0, StopTime = 0.3, Interval = 3.3333333333333333e-06));
+  annotation(experiment(StartTime = 0.0, StopTime = 0.3, Interval = 3.125e-06));
 end two_section_source;
