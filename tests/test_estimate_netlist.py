@@ -22,6 +22,7 @@ def test_netlist_frequency_recovers_values(netlist_dir):
     assert all(abs(e) < 2.0 for e in out["errors_percent"].values())
 
 
+@pytest.mark.slow
 def test_netlist_matches_builtin_model(netlist_dir):
     """The netlist file and the built-in two-section model hold the same circuit: same estimate."""
     a = run_estimate(_cfg(netlist_dir), progress=False)
@@ -69,6 +70,7 @@ def ngspice_record(tmp_path_factory, netlist_dir):
     return path
 
 
+@pytest.mark.slow
 @needs_ngspice
 @pytest.mark.parametrize("approach", ["frequency", "frequency-simulated", "time", "emd", "iemd"])
 def test_netlist_every_approach_on_ngspice_record(netlist_dir, ngspice_record, approach):

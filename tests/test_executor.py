@@ -461,12 +461,14 @@ def killed_then_resumed(tmp_path_factory):
             "rows": _stable(json.loads(stdout)["rows"])}
 
 
+@pytest.mark.slow
 def test_sigkill_of_the_main_process_ends_its_workers_and_frees_the_pipes(killed_then_resumed):
     assert killed_then_resumed["pipes_s"] < 5 and killed_then_resumed["gone"], "workers outlived the main process"
     assert len(killed_then_resumed["stored"]) >= 1
     assert f"{len(killed_then_resumed['stored'])} already stored" in killed_then_resumed["resume_err"]
 
 
+@pytest.mark.slow
 def test_ctrl_c_to_the_group_stops_with_one_line_and_resume_gives_the_same_answer(tmp_path, killed_then_resumed):
     out = tmp_path / "out"
     proc = _start(out, 1)

@@ -88,6 +88,7 @@ def _synthetic(case: str, ppd: int = 20):
     return spec, f, model.response_set().evaluate(f)
 
 
+@pytest.mark.slow
 def test_wnrmse_is_zero_at_the_generating_values_and_refine_recovers_them():
     spec, f, target = _synthetic("1")
     fit = hv.SixResponseFit(spec, f, target)
