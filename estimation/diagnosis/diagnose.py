@@ -72,6 +72,9 @@ UNMERGE_ABOVE_FLOOR = 10.0
 #: ... and, with every measured resonance already in the model without it, named only if its fit comes within this
 #: factor of ``NOISE_MARGIN`` times the noise floor.
 STRUCTURAL_FLOOR = 2.0
+#: A fit that reaches the noise floor but moves a value more than this many tolerances from the design
+#: (``|ln(v/d)| > GROSS_DRIFT ln(1 + tolerance)``) is not an explanation: causes are sought from the design values.
+GROSS_DRIFT = 2.0
 
 
 @dataclass
@@ -191,8 +194,8 @@ class _Context:
         return self.prior.drift({n: v for n, v in r.values.items() if n.lower() in anchored})
 
     def explained(self, r: FitResult) -> bool:
-        """``r`` fits to the noise floor with every value within the design tolerance."""
-        return r.objective <= NOISE_MARGIN * self.floor and not self.drift(r)
+        """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
+        return r.objective <= NOISE_MARGIN * self.floor and not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
 
 
 def diagnose_frequency(
