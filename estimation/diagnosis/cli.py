@@ -96,9 +96,26 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         if getattr(args, opt, None) is not None:
             raise DiagnosisError(f"--{opt.replace('_', '-')} needs --reference")
     data = load_measured(args.measured, segment=args.segment)
-    if isinstance(data, Waveforms):
+    if isinstance(data, Waveforms) and (args.model or args.netlist):
+        # a PRIS record of a winding: its input impedance diagnosed against the winding's design
+        from pris_cosim.models import get_model
+        from pris_cosim.netlist import read_netlist
+
+        from .report import write_report
+        from .winding_waveform import diagnose_winding_waveforms
+
+        model = get_model(args.model) if args.model else None
+        circuit = read_netlist(args.netlist) if args.netlist else None
+        if circuit is not None and not args.port:
+            raise DiagnosisError("a netlist baseline needs --port")
+        diag = diagnose_winding_waveforms(data, model=model, circuit=circuit, port=args.port,
+                                          tolerance=args.tolerance)
+        if args.report:
+            write_report(diag, args.report, source=Path(args.measured).name + " (impedance from the PRIS record)")
+    elif isinstance(data, Waveforms):
         if None in (args.rpris, args.lpris, args.cpris):
-            raise DiagnosisError("waveform data needs the nominal source values --rpris --lpris --cpris")
+            raise DiagnosisError("waveform data needs the nominal source values --rpris --lpris --cpris (the source "
+                                 "check on a resistive load), or --model / --netlist (a winding in the record)")
         from .waveform import diagnose_waveforms, write_report as write_waveform_report
 
         diag = diagnose_waveforms(data, args.rpris, args.lpris, args.cpris, r_load=args.rload, progress=True)
