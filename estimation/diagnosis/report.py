@@ -123,9 +123,14 @@ def write_report(diag: Diagnosis, directory: str | Path, source: str = "") -> Pa
     (out / "diagnosis.json").write_text(json.dumps(data, indent=1, default=float))
     ev = diag.evidence
     lines = [f"# Diagnosis{': ' + source if source else ''}", ""]
-    lines += [f"**Cause: `{diag.cause}`** — gain {diag.gain:.3f} (fraction of the baseline cost removed on the measured data).", ""]
-    lines += [f"Baseline: `{ev.get('baseline_model', '')}`, cost {_fmt(diag.baseline.cost)}; "
-              f"extended cost {_fmt(diag.best.cost) if diag.best else '-'}. Selection: {ev.get('criterion', '')}.", ""]
+    prior = np.isfinite(data.get("tolerance", np.inf) or np.inf)
+    lines += [f"**Cause: `{diag.cause}`** — gain {diag.gain:.3f} (fraction of the baseline cost removed on the measured "
+              "data" + (", each cost counting the design prior's penalty" if prior else "") + ").", ""]
+    pen = (f" + prior penalty {_fmt(diag.baseline.penalty)}" if prior else "")
+    pen_ext = (f" + {_fmt(diag.best.penalty)}" if prior and diag.best else "")
+    lines += [f"Baseline: `{ev.get('baseline_model', '')}`, cost {_fmt(diag.baseline.cost)}{pen}; "
+              f"extended cost {_fmt(diag.best.cost) + pen_ext if diag.best else '-'}; noise floor "
+              f"{_fmt(diag.noise.get('cost', 0.0))}. Selection: {ev.get('criterion', '')}.", ""]
     if data.get("causes") and len(data["causes"]) > 1:
         lines += ["Causes named, in order: " + ", ".join(f"`{c}`" for c in data["causes"]) + ".", ""]
     lines += drift_lines(data)
