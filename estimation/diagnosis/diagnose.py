@@ -350,9 +350,27 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             failed.append({"cause": cause, "cost": results.pop(cause).cost,
                            "reason": "no better than the baseline refitted from its circuit values"})
 
+    # ---- pairs: a missing section and a continuous effect fitted together, when no single cause is enough
+    pool = dict(results)
+    if ("missing-section" in todo and max_causes >= 2 and baseline.cost > UNMERGE_ABOVE_FLOOR * floor["cost"]
+            and not any(significant(baseline.bic, baseline.objective, r.bic, r.objective, min_delta_bic, min_gain)
+                        for r in results.values())):
+        for cause, single in results.items():
+            if cause in STRUCTURAL or not single.effects:
+                continue
+            t = time.perf_counter()
+            try:
+                pair = _fit_missing_section(ctx, single, single.effects, must_beat=single.objective)
+            except _CANDIDATE_FAILURES:
+                pair = None
+            if pair is None or pair.objective >= single.objective:
+                continue
+            pool[pair.cause] = pair
+            _log(f"pair {pair.cause}: cost {pair.cost:.4g}, gain {1 - pair.objective / baseline.objective:.3f}, "
+                 f"dBIC {baseline.bic - pair.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
+
     # ---- forward selection
     current, chosen, steps = baseline, [], []
-    pool = dict(results)
     while pool and len(chosen) < max_causes:
         if ctx.explained(current):
             _log("cost at the noise floor: no further cause", progress)
@@ -361,7 +379,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         need = min_gain if not chosen else min_step_gain
         if not significant(current.bic, current.objective, best.bic, best.objective, min_delta_bic, need):
             break
-        new_cause = next(c for c in best.causes if c not in chosen)
+        new_causes = [c for c in best.causes if c not in chosen]
+        new_cause = new_causes[-1] if any(c in STRUCTURAL for c in new_causes) and len(new_causes) > 1 else \
+            new_causes[0]
         if new_cause in STRUCTURAL:
             if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
                     and not missing_modes(f, data, current.predicted)):
@@ -370,7 +390,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                 failed.append({"cause": new_cause, "cost": best.cost,
                                "reason": "no measured resonance missing from the model without it, and the fit with "
                                          "it stays above the noise"})
-                pool.pop(new_cause)
+                pool.pop(best.cause if best.cause in pool else new_cause)
                 continue
             try:
                 held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale)
@@ -379,10 +399,16 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             if held < need:
                 _log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
                      "only)", progress)
-                failed.append({"cause": new_cause, "cost": best.cost,
+                failed.append({"cause": best.cause, "cost": best.cost,
                                "reason": f"held-out gain {held:.3f} below {need} (alternate points)"})
-                pool.pop(new_cause)
+                pool.pop(best.cause if best.cause in pool else new_cause)
                 continue
+        for other in new_causes[:-1] if len(new_causes) > 1 else []:  # a pair: the effect named with the section
+            steps.append({"cause": other, "joint": True, "gain": 1 - best.objective / current.objective,
+                          "delta_bic": current.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
+                          "total_gain": 1 - best.objective / baseline.objective, "model": best.structure})
+            chosen.append(other)
+        new_cause = new_causes[-1]
         steps.append({"cause": new_cause, "gain": 1 - best.objective / current.objective,
                       "delta_bic": current.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
                       "total_gain": 1 - best.objective / baseline.objective,
@@ -392,7 +418,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         current = best
         _log(f"step {len(chosen)}: {new_cause} (gain {steps[-1]['gain']:.3f}, dBIC {steps[-1]['delta_bic']:.1f})",
              progress)
-        remaining = [c for c in pool if c not in chosen]
+        remaining = [c for c in pool if c not in chosen and "+" not in c]
         pool = {}
         if len(chosen) >= max_causes or ctx.explained(current):
             continue
@@ -410,7 +436,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         n_named = len(chosen)
         current, chosen, steps = _drop_redundant(ctx, current, chosen, steps, min_delta_bic, progress)
         if len(chosen) < n_named:  # the order forward selection gives the causes kept: by their single fits
-            chosen.sort(key=lambda c: results[c].bic)
+            chosen.sort(key=lambda c: results[c].bic if c in results else np.inf)
 
     extended = current if chosen else None
     cands = sorted(results.values(), key=lambda r: r.bic)
@@ -644,7 +670,11 @@ def _single_causes(ctx: _Context, todo: Sequence[str], baseline: FitResult, prog
         else:
             # once a cause explains the data to the noise, the others are fitted from the fitted baseline only
             explained = any(ctx.explained(r) for r in results.values())
-            res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.objective, from_nominal=not explained)
+            # with a design prior, a baseline whose values all stay within GROSS_DRIFT tolerances has absorbed
+            # nothing: the design values add no start
+            distorted = ctx.prior is None or any(d["sigmas"] > GROSS_DRIFT for d in ctx.drift(baseline))
+            res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.objective,
+                                       from_nominal=distorted and not explained)
             variants_tried[cause] = variants
         if res is None:
             continue
