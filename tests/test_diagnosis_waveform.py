@@ -216,6 +216,7 @@ def test_non_positive_nominal(clean):
     _one_line_error("lpris must be a positive number", clean, **{**NOMINAL, "lpris": 0.0})
 
 
+@pytest.mark.slow
 def test_series_resistance_and_switch_parasitics_both_named():
     """A source with 2 Ohm more in series and switch parasitics (10.4 uH, 0.463 nF), simulated by
     pris_cosim.timedomain.simulate_pris (not the diagnosis's modal simulation), 0.3 % noise."""
