@@ -728,6 +728,8 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
 
 #: Most values freed from the prior when the drift is relaxed (:func:`_relaxed_drift`).
 MAX_FREED = 4
+#: A drifted value is reported only if holding it at its design value worsens the BIC by this much ("very strong").
+DRIFT_MIN_DBIC = 10.0
 
 
 def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict[str, Any]]:
@@ -738,7 +740,9 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
     tolerance is freed (its prior removed) and the model refitted; then the
     next, while any is left beyond the tolerance (at most ``MAX_FREED``).
     What stays beyond it after that is the drift reported, with the refitted
-    values. The named causes and the gain are not changed by this.
+    values, and of those only the values the data need: held at its design
+    value (the others refitted), the fit must lose ``DRIFT_MIN_DBIC``. The
+    named causes and the gain are not changed by this.
     """
     if ctx.prior is None:
         return []
@@ -761,7 +765,27 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
     if freed:
         _log(f"drift relaxed: {', '.join(freed)} freed from the prior; cost {final.cost:.4g} -> {current.cost:.4g}",
              progress)
-    return drift
+    # a value the data do not need off the design is not reported: held at its design value (the others refitted),
+    # the fit must lose at least DRIFT_MIN_DBIC
+    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
+    kept = []
+    for d in drift:
+        name = d["name"]
+        try:
+            held = current.fitted_circuit().with_values({name: d["design"]})
+            fit = ctx.fit(held, current.effects, fixed=[name], prior=loose)
+            tail = current.x[current_nc(current):]
+            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=40, tol=1e-6)
+        except _CANDIDATE_FAILURES:
+            kept.append(d)
+            continue
+        d["delta_bic"] = float(trial.bic - current.bic)
+        if d["delta_bic"] >= DRIFT_MIN_DBIC:
+            kept.append(d)
+        else:
+            _log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it (dBIC "
+                 f"{d['delta_bic']:.1f} at its design value): not reported", progress)
+    return kept
 
 
 def _topology(circuit: Circuit) -> list[tuple[str, str, tuple[str, ...]]]:
