@@ -39,11 +39,12 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         d = diagnose_waveforms(case.waveforms, **case.nominal, **case.diagnose_kwargs, progress=False)
         wall = time.perf_counter() - t0
-        row = {"true": cause, "seed": seed, "strength": case.strength, "named": d.cause, "gain": d.gain,
+        row = {"true": cause, "seed": seed, "strength": case.strength, "named": d.cause, "causes": d.causes,
+               "gain": d.gain,
                "samples": case.waveforms.n_samples, "wall_s": wall, "extension": d.best.extra if d.best else {}}
         rows.append(row)
         print(f"{cause:18s} seed {seed:4d} strength {case.strength:.2f} samples {row['samples']:6d} -> "
-              f"{d.cause:18s} gain {d.gain:.3f}  {wall:6.1f} s", flush=True)
+              f"{'+'.join(d.causes) or 'none':18s} gain {d.gain:.3f}  {wall:6.1f} s", flush=True)
     named = ("none",) + tuple(c for c in WAVEFORM_CASE_CAUSES if c != "none")
     truths = named + ("thesis",)
     print("\nconfusion matrix (rows: hidden cause, columns: named cause)")
@@ -54,6 +55,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{t:18s}" + "".join(f"{c:19d}" for c in counts))
     gen = [r for r in rows if r["true"] != "thesis"]
     correct = sum(r["true"] == r["named"] for r in gen)
+    alone = sum(r["causes"] == ([] if r["true"] == "none" else [r["true"]]) for r in gen)
+    print(f"\nnamed alone (no further cause added by forward selection): {alone}/{len(gen)}")
     print(f"\naccuracy {correct}/{len(gen)}; gain of correctly named causes: min "
           f"{min([r['gain'] for r in gen if r['true'] == r['named'] and r['named'] != 'none'] or [float('nan')]):.3f}")
     for t in truths:

@@ -208,6 +208,17 @@ def one_port_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003
     nets["merged"] = _cascade(Rb, Lb, Cb, Cgb, kb)
     base_net = _cascade(jit(Rb), jit(Lb), jit(Cb), jit(Cgb), kb)
     nets["baseline"] = base_net.copy()
+    _one_port_effects(truth_net, causes, rng, f, truth)
+    nets["truth"] = truth_net
+    z = rs.impedance(truth_net, "n1", f)
+    return HiddenCase("one-port", causes, seed, noise, f, {"Zin": _noisy(z, noise, rng)},
+                      baseline_netlist=rs.to_spice(base_net, f"{n}-section cascade (baseline)"), port="n1", truth=truth,
+                      nets=nets)
+
+
+def _one_port_effects(truth_net: rs.Net, causes: tuple[str, ...], rng: np.random.Generator, f: np.ndarray,
+                      truth: dict) -> None:
+    """Skin effect, magnetising change and core loss written into a cascade (in place)."""
     if "skin-effect" in causes:
         kind = str(rng.choice(["bessel", "sqrt", "thesis"]))
         f_s = float(10 ** rng.uniform(4.0, 5.0))
@@ -230,10 +241,44 @@ def one_port_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003
         f_b = float(10 ** rng.uniform(4.5, 6))
         truth_net.add("Rcore_hidden", "n1", "0", core_resistance(kind, r_hf, f_b))
         truth["core"] = {"kind": kind, "r_hf": r_hf, "f_b": f_b}
+
+
+DESIGN_SPREAD = 0.10  # the truth's values are the design's within 10 %
+
+
+def design_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003, drift: bool = False,
+                points: int = 200) -> HiddenCase:
+    """A winding built to a design: the baseline netlist is the design, the truth its values within 10 %.
+
+    A 4- to 6-section cascade (1 kHz - 10 MHz). With ``drift`` one
+    capacitance of the truth is at twice its design value (a value off the
+    design, not a catalogue cause: ``truth["drift"]`` names it). Hidden
+    effects as in :func:`one_port_case`.
+    """
+    causes = tuple(sorted(c for c in ((causes,) if isinstance(causes, str) else causes) if c != "none"))
+    rng = np.random.default_rng([seed, 33, int(drift)] + [SINGLE.index(c) for c in causes])
+    n = int(rng.choice([4, 5, 6]))
+    f = np.logspace(3, 7, points)
+    R = list(1.5 * rng.uniform(0.7, 1.4, n) * 4 / n)
+    L = list(2.5e-3 * rng.uniform(0.8, 1.3, n) * 4 / n)
+    C = list(0.8e-9 * rng.uniform(0.8, 1.3, n) * n / 4)
+    Cg = list(0.9e-9 * rng.uniform(0.8, 1.3, n) * 4 / n)
+    k = _couplings(n, rng.uniform(0.6, 0.8), rng.uniform(1.5, 4.0))
+    design = _cascade(R, L, C, Cg, k)
+    jit = lambda v: [x * rng.uniform(1 - DESIGN_SPREAD, 1 + DESIGN_SPREAD) for x in v]  # noqa: E731
+    Rt, Lt, Ct, Cgt = jit(R), jit(L), jit(C), jit(Cg)
+    truth: dict = {"sections": n, "spread": DESIGN_SPREAD}
+    if drift:
+        j = int(rng.integers(0, n))
+        Ct[j] = 2 * C[j]
+        truth["drift"] = [f"C{j + 1}"]
+    truth_net = _cascade(Rt, Lt, Ct, Cgt, k)
+    nets = {"baseline": design.copy(), "merged": design.copy(), "sections": truth_net.copy()}
+    _one_port_effects(truth_net, causes, rng, f, truth)
     nets["truth"] = truth_net
     z = rs.impedance(truth_net, "n1", f)
-    return HiddenCase("one-port", causes, seed, noise, f, {"Zin": _noisy(z, noise, rng)},
-                      baseline_netlist=rs.to_spice(base_net, f"{n}-section cascade (baseline)"), port="n1", truth=truth,
+    return HiddenCase("design", causes, seed, noise, f, {"Zin": _noisy(z, noise, rng)},
+                      baseline_netlist=rs.to_spice(design, f"{n}-section cascade (design)"), port="n1", truth=truth,
                       nets=nets)
 
 

@@ -27,6 +27,7 @@ def real_short():
     return read_multisegment_csv(REAL, "short")
 
 
+@pytest.mark.slow
 def test_real_short_circuit_is_skin_effect(real_short, tmp_path):
     d = diagnose_frequency(real_short.frequency_hz, real_short.responses, progress=False)
     assert d.cause == "skin-effect" and d.gain >= 0.5
@@ -42,6 +43,7 @@ def test_real_short_circuit_is_skin_effect(real_short, tmp_path):
     assert (tmp_path / "rep" / "extended.cir").exists()
 
 
+@pytest.mark.slow
 def test_cli_real_open_segment_report(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "pris_cosim", "diagnose", "--measured", str(REAL), "--segment", "open",
                            "--report", str(tmp_path / "open"), "--json"], capture_output=True, text=True, timeout=300)
@@ -90,6 +92,7 @@ def test_cli_bad_input_one_line(tmp_path):
     assert len(proc.stderr.strip().splitlines()) == 1 and "z.csv" in proc.stderr
 
 
+@pytest.mark.slow
 def test_extended_model_is_simulable_and_an_fmu(real_short, tmp_path):
     """The frequency-dependent extension is realised as a circuit: exact time stepping and an FMU build work."""
     from pris_cosim import codegen, fmi

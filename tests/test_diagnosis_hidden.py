@@ -23,6 +23,7 @@ def _diagnose(case):
                               port=case.port, progress=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2])
 def test_netlist_cascade_skin_effect_is_named(seed):
     """A 4-section netlist cascade whose resistances rise with frequency (real-valued, thesis-like forms)."""
@@ -39,6 +40,7 @@ def test_clean_cascade_no_false_alarm():
     assert d.cause == "none" and d.causes == [], d.candidates()
 
 
+@pytest.mark.slow
 def test_cli_json_has_steps_and_noise_floor(tmp_path):
     case = one_port_case("skin-effect", 2, sections=4)
     net = tmp_path / "cascade.cir"
@@ -57,6 +59,7 @@ def test_cli_json_has_steps_and_noise_floor(tmp_path):
     assert all(c["gain"] > 0 for c in out["candidates"]) and out["gain"] >= 0.5
 
 
+@pytest.mark.slow
 def test_two_winding_thesis_skin_effect_on_hv_only():
     """hv-4section, six responses: R(f) of the HV sections in thesis (2.6)'s real-valued form, own scale."""
     from hidden_cases import two_winding_case

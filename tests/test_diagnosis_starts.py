@@ -6,6 +6,7 @@ solver); whether a hidden cause can be seen at all is decided by
 """
 
 import numpy as np
+import pytest
 
 from estimation.diagnosis import diagnose_frequency
 from estimation.diagnosis.catalogue import SkinEffect, winding_groups
@@ -21,6 +22,7 @@ def _diagnose(case, **kw):
                               port=case.port, progress=False, **kw)
 
 
+@pytest.mark.slow
 def test_undetectable_split_is_none():
     """A 2-section baseline of a 3-section truth that the baseline's structure reproduces within the noise.
 
@@ -34,6 +36,7 @@ def test_undetectable_split_is_none():
     assert d.causes == [] and d.baseline.cost <= 1.25 * d.noise["cost"], d.baseline.cost
 
 
+@pytest.mark.slow
 def test_effect_absorbed_by_the_fitted_baseline_is_found_from_the_design_values():
     """Thesis (2.5) rearranged on a 6-section cascade: the fitted baseline absorbs it into distorted values."""
     case = one_port_case("magnetising-inductance", 3)
@@ -43,6 +46,7 @@ def test_effect_absorbed_by_the_fitted_baseline_is_found_from_the_design_values(
     assert d.gain >= 0.9 and d.best.cost <= 1.25 * d.noise["cost"]
 
 
+@pytest.mark.slow
 def test_split_that_reaches_the_noise_is_named_without_a_missing_resonance():
     """A 7-section truth merged to 6: every measured resonance is in the baseline, the split alone reaches the noise."""
     case = one_port_case("missing-section", 2)

@@ -7,6 +7,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from .prior import DEFAULT_TOLERANCE
+
 
 def register(subparsers: Any) -> None:
     """Add the ``diagnose`` sub-command."""
@@ -17,10 +19,14 @@ def register(subparsers: Any) -> None:
     src.add_argument("--netlist", metavar="FILE", help="baseline netlist (with --port)")
     src.add_argument("--model", metavar="NAME", help="baseline built-in model")
     p.add_argument("--port", metavar="NODE", help="driven node of the baseline netlist")
-    p.add_argument("--rpris", type=float, help="nominal source resistance, Ohm (waveform data)")
-    p.add_argument("--lpris", type=float, help="nominal source inductance, H (waveform data)")
-    p.add_argument("--cpris", type=float, help="nominal source capacitance, F (waveform data)")
-    p.add_argument("--rload", type=float, help="load resistance if known, Ohm (waveform data)")
+    p.add_argument("--tolerance", type=_tolerance, default=DEFAULT_TOLERANCE, metavar="REL",
+                   help="how far the netlist's or model's values (the design) may be from the truth, relative "
+                   f"(default {DEFAULT_TOLERANCE:g}: a log-normal prior of that width on every value; values moved "
+                   "beyond it are reported as drift; 'inf' leaves the values free)")
+    p.add_argument("--rpris", type=_value, help="nominal source resistance, Ohm (waveform data; 150, 4.7k ...)")
+    p.add_argument("--lpris", type=_value, help="nominal source inductance, H (waveform data; 4m, 0.004 ...)")
+    p.add_argument("--cpris", type=_value, help="nominal source capacitance, F (waveform data; 1u, 1e-6 ...)")
+    p.add_argument("--rload", type=_value, help="load resistance if known, Ohm (waveform data)")
     p.add_argument("--report", metavar="DIR", help="write report.md with plots into DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     sf = p.add_argument_group("SFRA (two-port Touchstone sweeps against a healthy fingerprint)")
@@ -33,6 +39,30 @@ def register(subparsers: Any) -> None:
     sf.add_argument("--model-out", metavar="FILE", help="write the fitted fault model as a Touchstone file (.s2p)")
     sf.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=cmd_diagnose)
+
+
+def _value(text: str) -> float:
+    """A value as every command reads it: a number with an optional SPICE scale suffix (``4m``, ``1u``, ``1e-6``)."""
+    from pris_cosim.units import parse_value
+
+    try:
+        return parse_value(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"cannot parse value {text!r} (a number such as 4m, 1u or 1e-6)") from None
+
+
+def _tolerance(text: str) -> float:
+    """``--tolerance``: a positive relative value (``0.2``, ``20%``) or ``inf``."""
+    t = text.strip().lower()
+    if t in ("inf", "infinity", "none", "free"):
+        return float("inf")
+    try:
+        v = float(t[:-1]) / 100 if t.endswith("%") else _value(t)
+    except (ValueError, argparse.ArgumentTypeError):
+        raise argparse.ArgumentTypeError(f"--tolerance must be a positive number or inf, got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"--tolerance must be a positive number or inf, got {text!r}")
+    return v
 
 
 def _sections(text: str) -> int:
@@ -66,9 +96,26 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         if getattr(args, opt, None) is not None:
             raise DiagnosisError(f"--{opt.replace('_', '-')} needs --reference")
     data = load_measured(args.measured, segment=args.segment)
-    if isinstance(data, Waveforms):
+    if isinstance(data, Waveforms) and (args.model or args.netlist):
+        # a PRIS record of a winding: its input impedance diagnosed against the winding's design
+        from pris_cosim.models import get_model
+        from pris_cosim.netlist import read_netlist
+
+        from .report import write_report
+        from .winding_waveform import diagnose_winding_waveforms
+
+        model = get_model(args.model) if args.model else None
+        circuit = read_netlist(args.netlist) if args.netlist else None
+        if circuit is not None and not args.port:
+            raise DiagnosisError("a netlist baseline needs --port")
+        diag = diagnose_winding_waveforms(data, model=model, circuit=circuit, port=args.port,
+                                          tolerance=args.tolerance)
+        if args.report:
+            write_report(diag, args.report, source=Path(args.measured).name + " (impedance from the PRIS record)")
+    elif isinstance(data, Waveforms):
         if None in (args.rpris, args.lpris, args.cpris):
-            raise DiagnosisError("waveform data needs the nominal source values --rpris --lpris --cpris")
+            raise DiagnosisError("waveform data needs the nominal source values --rpris --lpris --cpris (the source "
+                                 "check on a resistive load), or --model / --netlist (a winding in the record)")
         from .waveform import diagnose_waveforms, write_report as write_waveform_report
 
         diag = diagnose_waveforms(data, args.rpris, args.lpris, args.cpris, r_load=args.rload, progress=True)
@@ -85,7 +132,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         circuit = read_netlist(args.netlist) if args.netlist else None
         if circuit is not None and not args.port:
             raise DiagnosisError("a netlist baseline needs --port")
-        diag = diagnose_frequency(data.frequency_hz, data.responses, model=model, circuit=circuit, port=args.port)
+        diag = diagnose_frequency(data.frequency_hz, data.responses, model=model, circuit=circuit, port=args.port,
+                                  tolerance=args.tolerance)
         if args.report:
             write_report(diag, args.report, source=Path(args.measured).name + (f" [{args.segment}]" if args.segment else ""))
     out = diag.as_json()
@@ -97,6 +145,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         _emit(_plain(out))
     else:
         print(f"cause: {out['cause']}  gain: {out['gain']:.3f}")
+        if out.get("causes") and len(out["causes"]) > 1:
+            print(f"causes: {' + '.join(out['causes'])}")
+        for d in out.get("drift") or []:
+            print(f"  drift {d['name']}: design {d['design']:.4g}, fitted {d['fitted']:.4g} (x{d['ratio']:.3g})")
         for c in out["candidates"]:
             print(f"  {c['cause']:<24} cost {c['cost']:.4g}  gain {c['gain']:.3f}")
         if args.report:

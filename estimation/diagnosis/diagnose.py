@@ -42,7 +42,7 @@ import itertools
 import sys
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -55,6 +55,7 @@ from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
 from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
 from .evidence import band_table, localise, noise_floor, resonance_comparison, unexplained_bands
 from .holdout import held_out_gain
+from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from .fit import DiagnosisError, FitResult, FrequencyFit, configuration_ports, group_names, significant
 from .realise import realise_extended
 from .sections import section_candidates
@@ -71,6 +72,9 @@ UNMERGE_ABOVE_FLOOR = 10.0
 #: ... and, with every measured resonance already in the model without it, named only if its fit comes within this
 #: factor of ``NOISE_MARGIN`` times the noise floor.
 STRUCTURAL_FLOOR = 2.0
+#: A fit that reaches the noise floor but moves a value more than this many tolerances from the design
+#: (``|ln(v/d)| > GROSS_DRIFT ln(1 + tolerance)``) is not an explanation: causes are sought from the design values.
+GROSS_DRIFT = 2.0
 
 
 @dataclass
@@ -91,17 +95,24 @@ class Diagnosis:
     noise: dict[str, Any] = field(default_factory=dict)
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     failed: list[dict[str, Any]] = field(default_factory=list)
+    drift: list[dict[str, Any]] = field(default_factory=list)
+    baseline_drift: list[dict[str, Any]] = field(default_factory=list)
+    tolerance: float = float("inf")
 
     @property
     def gain(self) -> float:
-        """Fraction of the baseline cost removed by the model with every named cause."""
-        return 0.0 if self.best is None else max(0.0, 1 - self.best.cost / self.baseline.cost)
+        """Fraction of the baseline cost removed by the model with every named cause.
+
+        With a design prior the costs are penalised (:attr:`.fit.FitResult.objective`): a baseline that fits
+        only by moving values far from the design does not count as a fit.
+        """
+        return 0.0 if self.best is None else max(0.0, 1 - self.best.objective / self.baseline.objective)
 
     def candidates(self) -> list[dict[str, Any]]:
         rows = []
         for r in self.fits:
             rows.append({
-                "cause": r.cause, "cost": r.cost, "gain": max(0.0, 1 - r.cost / self.baseline.cost), "bic": r.bic,
+                "cause": r.cause, "cost": r.cost, "gain": max(0.0, 1 - r.objective / self.baseline.objective), "bic": r.bic,
                 "delta_bic": self.baseline.bic - r.bic, "n_params": r.n_params, "extra": r.extra,
                 "form": r.effects[0].form if r.effects else "", "group": r.effects[0].group if r.effects else "",
                 "formula": r.describe()[0]["formula"] if r.effects else r.structure, "wall_s": r.wall_s,
@@ -117,7 +128,12 @@ class Diagnosis:
             "candidates": self.candidates(),
             "baseline_cost": self.baseline.cost,
             "extended_cost": ext.cost if ext else self.baseline.cost,
+            "baseline_penalty": self.baseline.penalty,
+            "extended_penalty": ext.penalty if ext else self.baseline.penalty,
             "gain": self.gain,
+            "tolerance": self.tolerance,
+            "drift": list(self.drift),
+            "baseline_drift": list(self.baseline_drift),
             "noise_floor": self.noise.get("cost", 0.0),
             "noise": self.noise,
             "unexplained": self.unexplained,
@@ -164,10 +180,23 @@ class _Context:
     progress: bool
     nominal: Circuit | None = None
     floor: float = 0.0
+    prior: DesignPrior | None = None
 
-    def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = ()) -> FrequencyFit:
+    def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
+            prior: DesignPrior | None | str = "same") -> FrequencyFit:
         return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
-                            self.scale)
+                            self.scale, self.prior if isinstance(prior, str) else prior)
+
+    def drift(self, r: FitResult) -> list[dict[str, Any]]:
+        """Values of ``r`` moved beyond the design tolerance (none without a prior)."""
+        if self.prior is None:
+            return []
+        anchored = self.prior.anchored(r.circuit)
+        return self.prior.drift({n: v for n, v in r.values.items() if n.lower() in anchored})
+
+    def explained(self, r: FitResult) -> bool:
+        """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
+        return r.objective <= NOISE_MARGIN * self.floor and not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
 
 
 def diagnose_frequency(
@@ -182,6 +211,7 @@ def diagnose_frequency(
     max_causes: int = 3,
     causes: Sequence[str] | None = None,
     progress: bool = True,
+    tolerance: float = DEFAULT_TOLERANCE,
 ) -> Diagnosis:
     """Diagnose measured frequency responses against a baseline model.
 
@@ -204,6 +234,12 @@ def diagnose_frequency(
         Causes to try (default: the whole catalogue).
     progress : bool
         Progress lines on stderr.
+    tolerance : float
+        How far the baseline's values (a netlist or a built-in model: the
+        design) may be from the truth, relative (default 0.2). Every fit gets
+        a log-normal prior of that width around the design values
+        (:mod:`.prior`); ``inf`` leaves the values free. No effect on a
+        lumped baseline fitted to the data.
 
     Returns
     -------
@@ -214,14 +250,16 @@ def diagnose_frequency(
     with threadpool_limits(limits=1):  # small matrices: BLAS threads only contend for the cores
         try:
             return _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_gain, min_step_gain,
-                             max_causes, causes, progress)
+                             max_causes, causes, progress, tolerance)
         except CircuitError as exc:
             raise DiagnosisError(f"baseline: {exc}") from None
 
 
 def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_gain, min_step_gain, max_causes,
-              causes, progress) -> Diagnosis:
+              causes, progress, tolerance=DEFAULT_TOLERANCE) -> Diagnosis:
     t0 = time.perf_counter()
+    if not (isinstance(tolerance, (int, float)) and tolerance > 0):
+        raise DiagnosisError(f"--tolerance must be a positive number or inf, got {tolerance!r}")
     f = np.asarray(frequency_hz, float)
     data = {k: np.asarray(v, complex) for k, v in measured.items()}
     if not data:
@@ -250,6 +288,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             raise DiagnosisError(f"no baseline given: one-port data expected, got responses {', '.join(data)}")
         data = {"Zin": next(iter(data.values()))}
     floor = noise_floor(f, data)
+    prior = None
     # ---- baseline
     if model is None:
         starts = lumped_from_data(f, data["Zin"])
@@ -260,8 +299,11 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                       starts[best_i].configurations, family=("lumped",))
         _log(f"no baseline given: lumped R-L-C fitted (cost {baseline.cost:.4g})", progress)
     else:
-        baseline = fit_multistart(FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed),
-                                  good_enough=NOISE_MARGIN * floor["cost"])
+        design = FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed)
+        prior = design_prior(dict(zip(design.free, design.start)), tolerance, floor["cost"], f.size, len(data),
+                             model.circuit)
+        baseline = fit_multistart(FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed,
+                                               prior=prior), good_enough=NOISE_MARGIN * floor["cost"])
         _log(f"baseline {model.name} fitted: cost {baseline.cost:.4g} in {baseline.wall_s:.1f} s", progress)
     worst = max(float(np.sqrt(np.mean(np.abs(e) ** 2))) for e in baseline.errors.values())
     if worst > MAX_BASELINE_RMS:
@@ -274,6 +316,11 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     ctx = _Context(f, data, configs, fixed, impedance_scale, one_port, progress,
                    nominal=model.circuit if model.family != ("lumped",) else None)
     ctx.floor = floor["cost"]
+    ctx.prior = prior
+    if prior is not None:
+        moved = ctx.drift(baseline)
+        _log(f"design prior: tolerance {prior.tolerance:g}; baseline moved {len(moved)} value(s) beyond it"
+             + (": " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in moved[:6]) if moved else ""), progress)
     _log(f"noise floor {floor['cost']:.3g} (noise RMS "
          + ", ".join(f"{k} {100 * v:.2g} %" for k, v in floor["per_response"].items()) + ")", progress)
 
@@ -281,49 +328,69 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # baseline adopts them and every cause is fitted again from it (at most twice)
     # (each cause keeps its best fit over the passes; no second pass once a cause reaches the noise floor)
     results, failed, variants_tried = {}, [], {}
-    passes = 3 if baseline.cost > NOISE_MARGIN * floor["cost"] else 0
+    passes = 0 if ctx.explained(baseline) else 3
     if not passes:
-        _log("the baseline fits to the noise floor: no cause is fitted", progress)
+        _log("the baseline fits to the noise floor within the design tolerance: no cause is fitted", progress)
     for attempt in range(passes):
         res_i, failed_i, variants_i = _single_causes(ctx, todo, baseline, progress)
         for cause, r in res_i.items():
-            if cause not in results or r.cost < results[cause].cost:
+            if cause not in results or r.objective < results[cause].objective:
                 results[cause] = r
         failed = [x for x in failed + failed_i if x["cause"] not in results]
         variants_tried.update(variants_i)
         polished = _polish_baseline(ctx, baseline, results.values(), progress)
-        moved = polished.cost < 0.5 * baseline.cost
+        moved = polished.objective < 0.5 * baseline.objective
         baseline = polished
-        explained = bool(results) and min(r.cost for r in results.values()) <= NOISE_MARGIN * floor["cost"]
+        explained = any(ctx.explained(r) for r in results.values())
         if not moved or explained or attempt == 2:
             break
         _log("causes fitted again from the refitted baseline", progress)
     for cause in list(results):
-        if results[cause].cost >= baseline.cost:
+        if results[cause].objective >= baseline.objective:
             failed.append({"cause": cause, "cost": results.pop(cause).cost,
                            "reason": "no better than the baseline refitted from its circuit values"})
 
+    # ---- pairs: a missing section and a continuous effect fitted together, when no single cause is enough
+    pool = dict(results)
+    if ("missing-section" in todo and max_causes >= 2 and baseline.cost > UNMERGE_ABOVE_FLOOR * floor["cost"]
+            and not any(significant(baseline.bic, baseline.objective, r.bic, r.objective, min_delta_bic, min_gain)
+                        for r in results.values())):
+        for cause, single in results.items():
+            if cause in STRUCTURAL or not single.effects:
+                continue
+            t = time.perf_counter()
+            try:
+                pair = _fit_missing_section(ctx, single, single.effects, must_beat=single.objective)
+            except _CANDIDATE_FAILURES:
+                pair = None
+            if pair is None or pair.objective >= single.objective:
+                continue
+            pool[pair.cause] = pair
+            _log(f"pair {pair.cause}: cost {pair.cost:.4g}, gain {1 - pair.objective / baseline.objective:.3f}, "
+                 f"dBIC {baseline.bic - pair.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
+
     # ---- forward selection
     current, chosen, steps = baseline, [], []
-    pool = dict(results)
     while pool and len(chosen) < max_causes:
-        if current.cost <= NOISE_MARGIN * floor["cost"]:
+        if ctx.explained(current):
             _log("cost at the noise floor: no further cause", progress)
             break
         best = min(pool.values(), key=lambda r: r.bic)
         need = min_gain if not chosen else min_step_gain
-        if not significant(current.bic, current.cost, best.bic, best.cost, min_delta_bic, need):
+        if not significant(current.bic, current.objective, best.bic, best.objective, min_delta_bic, need):
             break
-        new_cause = next(c for c in best.causes if c not in chosen)
+        new_causes = [c for c in best.causes if c not in chosen]
+        new_cause = new_causes[-1] if any(c in STRUCTURAL for c in new_causes) and len(new_causes) > 1 else \
+            new_causes[0]
         if new_cause in STRUCTURAL:
-            if (getattr(best, "merged_back", None) and best.cost > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
+            if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
                     and not missing_modes(f, data, current.predicted)):
                 _log(f"{new_cause}: the model without it has every measured resonance and the split does not reach "
                      "the noise: refused", progress)
                 failed.append({"cause": new_cause, "cost": best.cost,
                                "reason": "no measured resonance missing from the model without it, and the fit with "
                                          "it stays above the noise"})
-                pool.pop(new_cause)
+                pool.pop(best.cause if best.cause in pool else new_cause)
                 continue
             try:
                 held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale)
@@ -332,29 +399,36 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             if held < need:
                 _log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
                      "only)", progress)
-                failed.append({"cause": new_cause, "cost": best.cost,
+                failed.append({"cause": best.cause, "cost": best.cost,
                                "reason": f"held-out gain {held:.3f} below {need} (alternate points)"})
-                pool.pop(new_cause)
+                pool.pop(best.cause if best.cause in pool else new_cause)
                 continue
-        steps.append({"cause": new_cause, "gain": 1 - best.cost / current.cost, "delta_bic": current.bic - best.bic,
-                      "cost": best.cost, "total_gain": 1 - best.cost / baseline.cost,
+        for other in new_causes[:-1] if len(new_causes) > 1 else []:  # a pair: the effect named with the section
+            steps.append({"cause": other, "joint": True, "gain": 1 - best.objective / current.objective,
+                          "delta_bic": current.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
+                          "total_gain": 1 - best.objective / baseline.objective, "model": best.structure})
+            chosen.append(other)
+        new_cause = new_causes[-1]
+        steps.append({"cause": new_cause, "gain": 1 - best.objective / current.objective,
+                      "delta_bic": current.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
+                      "total_gain": 1 - best.objective / baseline.objective,
                       "model": best.structure + ("; " if best.structure and best.effects else "")
                       + ", ".join(e.label for e in best.effects)})
         chosen.append(new_cause)
         current = best
         _log(f"step {len(chosen)}: {new_cause} (gain {steps[-1]['gain']:.3f}, dBIC {steps[-1]['delta_bic']:.1f})",
              progress)
-        remaining = [c for c in pool if c not in chosen]
+        remaining = [c for c in pool if c not in chosen and "+" not in c]
         pool = {}
-        if len(chosen) >= max_causes or current.cost <= NOISE_MARGIN * floor["cost"]:
+        if len(chosen) >= max_causes or ctx.explained(current):
             continue
         for cause in remaining:
             t = time.perf_counter()
             res = _extend(ctx, current, cause, results[cause], variants_tried.get(cause, []))
-            if res is None or res.cost >= current.cost:
+            if res is None or res.objective >= current.objective:
                 continue
             pool[cause] = res
-            _log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.cost / current.cost:.3f}, "
+            _log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.objective / current.objective:.3f}, "
                  f"dBIC {current.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
 
     # ---- backward check: a cause made redundant by those named after it is dropped
@@ -362,13 +436,20 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         n_named = len(chosen)
         current, chosen, steps = _drop_redundant(ctx, current, chosen, steps, min_delta_bic, progress)
         if len(chosen) < n_named:  # the order forward selection gives the causes kept: by their single fits
-            chosen.sort(key=lambda c: results[c].bic)
+            chosen.sort(key=lambda c: results[c].bic if c in results else np.inf)
 
     extended = current if chosen else None
     cands = sorted(results.values(), key=lambda r: r.bic)
     diag = Diagnosis(chosen[0] if chosen else "none", baseline, extended, cands, f, data, causes=chosen, steps=steps,
                      noise=floor, failed=failed)
     final = extended or baseline
+    diag.tolerance = float(tolerance) if prior is not None else float("inf")
+    diag.drift = _relaxed_drift(ctx, final, progress)
+    diag.baseline_drift = ctx.drift(baseline)
+    if diag.drift:
+        _log("values beyond the design tolerance in the final model: "
+             + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift),
+             progress)
     diag.unexplained = unexplained_bands(f, final.errors, floor["per_response"])
     diag.evidence = {
         "baseline_model": model.name,
@@ -378,7 +459,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         "bands_after": band_table(f, extended.errors) if extended else [],
         "gain_per_response": ({n: 1 - float(np.mean(np.abs(extended.errors[n]) ** 2) / np.mean(np.abs(baseline.errors[n]) ** 2))
                                for n in data} if extended else {}),
-        "criterion": (f"forward selection by BIC: a cause is named if dBIC >= {min_delta_bic} and it removes at least "
+        "criterion": (("" if prior is None else f"every fit penalised by a log-normal prior around the design values "
+                       f"(tolerance {prior.tolerance:g}), BIC and gains on the penalised cost; ")
+                      + f"forward selection by BIC: a cause is named if dBIC >= {min_delta_bic} and it removes at least "
                       f"{min_gain} (first cause) or {min_step_gain} (further causes) of the cost left; stop at "
                       f"{NOISE_MARGIN} x the noise floor"),
     }
@@ -400,6 +483,9 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
                    max_nfev: int = 200, good_enough: float = 0.0) -> FitResult:
     """The baseline's values fitted from the given values and, unless that fit is good enough, from random starts.
 
+    The fit from the given values is continued from smoothed errors
+    (:meth:`.fit.FrequencyFit.fit_continued`): a resonance of the design a
+    few per cent off the measured one stalls a local fit of the raw errors.
     A local fit from the design values alone can end in a poor optimum of
     the baseline (one value driven to a bound while the others compensate),
     and every cause would then seem to explain the data. The random starts
@@ -421,15 +507,15 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
         Cost at which the fit from the given values is kept without trying
         the random starts (the noise floor).
     """
-    first = fit.fit(max_nfev=max_nfev)
-    if first.cost <= good_enough or starts <= 0:
+    first = fit.fit_continued(fit.start_vectors()[0], max_nfev=max_nfev)
+    if first.objective <= good_enough or starts <= 0:
         return first
     rng = np.random.default_rng(20260101)
     lo, hi = fit.bounds()
     x0 = fit.start_vectors()[0]
     X = np.clip(x0 + spread * rng.standard_normal((starts, x0.size)), lo + 1e-9, hi - 1e-9)
     short = fit.fit(x0s=X, grid=False, keep_starts=starts, max_nfev=max(10, max_nfev // 2))
-    if short.cost >= first.cost:
+    if short.objective >= first.objective:
         return first
     best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)
     best.wall_s += first.wall_s + short.wall_s
@@ -461,7 +547,7 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
     best = None
     for start in [circuit] + ([ctx.nominal] if ctx.nominal is not None and not base.effects and from_nominal
                               else []):
-        if pools and best is not None and best.cost <= NOISE_MARGIN * ctx.floor:
+        if pools and best is not None and ctx.explained(best):
             break  # explained to the noise from the fitted baseline: the design values are not needed
         screened = []
         for eff in variants:
@@ -474,14 +560,14 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
         screened.sort(key=lambda t: t[0])
         pools.append(screened)
         for i, (cost, eff, fit, pre) in enumerate(screened[:top if len(pools) == 1 else 1]):
-            if i and best is not None and best.cost < must_beat and cost > 2 * screened[0][0]:
+            if i and best is not None and best.objective < must_beat and cost > 2 * screened[0][0]:
                 break  # a clearly worse variant is not refined
             try:
                 res = fit.fit([_effect_starts(ctx, fit, eff)], x0s=pre.x[None], keep_starts=1, must_beat=must_beat,
                               max_nfev=50 if len(pools) == 1 else 30, tol=1e-6)
             except _CANDIDATE_FAILURES:
                 continue
-            if best is None or res.cost < best.cost:
+            if best is None or res.objective < best.objective:
                 best = res
     return best, [t[1] for t in pools[0]]
 
@@ -516,7 +602,7 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     staged.sort(key=lambda t: t[0])
     best = None
     for i, (_, cand, first) in enumerate(staged):
-        if i >= top and (best is not None and best.cost < must_beat or i >= top + 3):
+        if i >= top and (best is not None and best.objective < must_beat or i >= top + 3):
             break
         try:
             fit = ctx.fit(cand.circuit.with_values(first.values), effects)
@@ -528,12 +614,12 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"] if effects else \
             ["missing-section"]
         res.cause = "+".join(res.causes)
-        if best is None or res.cost < best.cost:
+        if best is None or res.objective < best.objective:
             best = res
     if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor
                                     or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
         found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
-        if found is not None and (best is None or found[0].cost < best.cost):
+        if found is not None and (best is None or found[0].objective < best.objective):
             best, um = found
             best.structure = um.candidate.how
             best.merged_back = {**best.values, **um.merged_back(best.fitted_circuit())}
@@ -552,7 +638,7 @@ def _polish_baseline(ctx: _Context, baseline: FitResult, fits, progress: bool) -
     """
     best = baseline
     free = {n.lower() for n in baseline.values}
-    for r in sorted(fits, key=lambda r: r.cost):
+    for r in sorted(fits, key=lambda r: r.objective):
         values = r.values
         if getattr(r, "merged_back", None):  # a split fitted from the nominal: its two sections merged again
             values = {n: v for n, v in r.merged_back.items() if n.lower() in free}
@@ -563,7 +649,7 @@ def _polish_baseline(ctx: _Context, baseline: FitResult, fits, progress: bool) -
                 max_nfev=200 if values is not r.values else 80, tol=1e-8)
         except _CANDIDATE_FAILURES:
             continue
-        if trial.cost < best.cost * (1 - 1e-6):
+        if trial.objective < best.objective * (1 - 1e-6):
             best = trial
     if best is not baseline:
         best.wall_s += baseline.wall_s
@@ -580,15 +666,19 @@ def _single_causes(ctx: _Context, todo: Sequence[str], baseline: FitResult, prog
     for cause in todo:
         t = time.perf_counter()
         if cause == "missing-section":
-            res = _fit_missing_section(ctx, baseline, [], must_beat=baseline.cost)
+            res = _fit_missing_section(ctx, baseline, [], must_beat=baseline.objective)
         else:
             # once a cause explains the data to the noise, the others are fitted from the fitted baseline only
-            explained = any(r.cost <= NOISE_MARGIN * ctx.floor for r in results.values())
-            res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.cost, from_nominal=not explained)
+            explained = any(ctx.explained(r) for r in results.values())
+            # with a design prior, a baseline whose values all stay within GROSS_DRIFT tolerances has absorbed
+            # nothing: the design values add no start
+            distorted = ctx.prior is None or any(d["sigmas"] > GROSS_DRIFT for d in ctx.drift(baseline))
+            res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.objective,
+                                       from_nominal=distorted and not explained)
             variants_tried[cause] = variants
         if res is None:
             continue
-        if res.cost >= baseline.cost:
+        if res.objective >= baseline.objective:
             failed.append({"cause": cause, "cost": res.cost, "reason": "every start ended at or above the baseline cost"})
             _log(f"{cause}: failed (cost {res.cost:.4g} >= baseline {baseline.cost:.4g})", progress)
             continue
@@ -628,12 +718,74 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
                 _log(f"{eff.cause} dropped: redundant once {', '.join(res.causes)} are in the model "
                      f"(dBIC {current.bic - res.bic:.1f})", progress)
                 steps = steps + [{"cause": eff.cause, "dropped": True, "delta_bic": current.bic - res.bic,
-                                  "cost": res.cost, "gain": 1 - res.cost / current.cost}]
+                                  "cost": res.cost, "gain": 1 - res.objective / current.objective}]
                 chosen = [c for c in chosen if c != eff.cause]
                 current = res
                 changed = True
                 break
     return current, chosen, steps
+
+
+#: Most values freed from the prior when the drift is relaxed (:func:`_relaxed_drift`).
+MAX_FREED = 4
+#: A drifted value is reported only if holding it at its design value worsens the BIC by this much ("very strong").
+DRIFT_MIN_DBIC = 10.0
+
+
+def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict[str, Any]]:
+    """The values off the design in the final model, each freed from the prior in turn.
+
+    The prior pulls a value that is really off the design back towards it,
+    and the others then move to make up for it. The value furthest beyond the
+    tolerance is freed (its prior removed) and the model refitted; then the
+    next, while any is left beyond the tolerance (at most ``MAX_FREED``).
+    What stays beyond it after that is the drift reported, with the refitted
+    values, and of those only the values the data need: held at its design
+    value (the others refitted), the fit must lose ``DRIFT_MIN_DBIC``. The
+    named causes and the gain are not changed by this.
+    """
+    if ctx.prior is None:
+        return []
+    drift = ctx.drift(final)
+    current, freed = final, []
+    while len(freed) < MAX_FREED:
+        todo = [d for d in drift if d["name"].lower() not in freed]
+        if not todo:
+            break
+        freed.append(todo[0]["name"].lower())
+        loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
+        try:
+            fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose)
+            tail = current.x[current_nc(current):]
+            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-7)
+        except _CANDIDATE_FAILURES:
+            break
+        current = trial
+        drift = ctx.drift(current)
+    if freed:
+        _log(f"drift relaxed: {', '.join(freed)} freed from the prior; cost {final.cost:.4g} -> {current.cost:.4g}",
+             progress)
+    # a value the data do not need off the design is not reported: held at its design value (the others refitted),
+    # the fit must lose at least DRIFT_MIN_DBIC
+    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
+    kept = []
+    for d in drift:
+        name = d["name"]
+        try:
+            held = current.fitted_circuit().with_values({name: d["design"]})
+            fit = ctx.fit(held, current.effects, fixed=[name], prior=loose)
+            tail = current.x[current_nc(current):]
+            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=40, tol=1e-6)
+        except _CANDIDATE_FAILURES:
+            kept.append(d)
+            continue
+        d["delta_bic"] = float(trial.bic - current.bic)
+        if d["delta_bic"] >= DRIFT_MIN_DBIC:
+            kept.append(d)
+        else:
+            _log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it (dBIC "
+                 f"{d['delta_bic']:.1f} at its design value): not reported", progress)
+    return kept
 
 
 def _topology(circuit: Circuit) -> list[tuple[str, str, tuple[str, ...]]]:
@@ -645,7 +797,7 @@ def _extend(ctx: _Context, current: FitResult, cause: str, single: FitResult, va
             ) -> FitResult | None:
     """``current`` plus ``cause``, warm-started from ``current`` and from the cause's own single fit."""
     if cause == "missing-section":
-        return _fit_missing_section(ctx, current, current.effects, must_beat=current.cost)
+        return _fit_missing_section(ctx, current, current.effects, must_beat=current.objective)
     circuit = current.fitted_circuit()
     order = [single.effects[0]] + [v for v in variants if v.label != single.effects[0].label][:2]
     cur_tail = list(current.x[current_nc(current):])
@@ -660,11 +812,11 @@ def _extend(ctx: _Context, current: FitResult, cause: str, single: FitResult, va
             tails.insert(0, list(single.x[current_nc(single):]))
         x0s = np.array([[0.0] * fit.nc + cur_tail + t for t in tails])
         pre = fit.fit(x0s=x0s, grid=False, circuit_free=False, max_nfev=40, keep_starts=2)
-        res = fit.fit(x0s=pre.x[None], grid=False, keep_starts=1, max_nfev=50, must_beat=current.cost, tol=1e-6)
+        res = fit.fit(x0s=pre.x[None], grid=False, keep_starts=1, max_nfev=50, must_beat=current.objective, tol=1e-6)
         res.structure = current.structure
         res.causes = list(current.causes) + [cause]
         res.cause = "+".join(res.causes)
-        if best is None or res.cost < best.cost:
+        if best is None or res.objective < best.objective:
             best = res
     return best
 

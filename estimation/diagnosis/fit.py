@@ -32,6 +32,11 @@ from pris_cosim.models import Configuration
 
 from .catalogue import Effect, Groups, winding_groups
 from .network import ProbedConfiguration
+from .prior import DesignPrior
+
+
+#: Smoothing widths (decades of frequency) of a continued fit (:meth:`FrequencyFit.fit_continued`).
+CONTINUATION = (0.1, 0.03, 0.01)
 
 
 class DiagnosisError(ValueError):
@@ -78,6 +83,9 @@ class FitResult:
         Parameters of each effect.
     structure : str
         How the circuit was changed (missing section), else empty.
+    penalty, penalty_rss : float
+        The design prior's penalty in cost units and in residual-sum units
+        (0 without a prior).
     """
 
     cause: str
@@ -97,11 +105,18 @@ class FitResult:
     params: list[dict[str, float]] = field(default_factory=list)
     structure: str = ""
     x: np.ndarray = field(default=None, repr=False)
+    penalty: float = 0.0
+    penalty_rss: float = 0.0
 
     @property
     def bic(self) -> float:
-        """Bayesian information criterion ``N ln(RSS/N) + k ln N``."""
-        return bic(self.rss, self.n_residuals, self.n_params)
+        """Bayesian information criterion ``N ln(RSS/N) + k ln N``, on the cost penalised by the design prior."""
+        return bic(self.rss + self.penalty_rss, self.n_residuals, self.n_params)
+
+    @property
+    def objective(self) -> float:
+        """What the fit minimised: the cost plus the design prior's penalty (:mod:`.prior`)."""
+        return self.cost + self.penalty
 
     def fitted_circuit(self) -> Circuit:
         """The fitted circuit (constant values; effects not applied)."""
@@ -160,6 +175,9 @@ class FrequencyFit:
         Frequency-dependent changes fitted with the circuit.
     scale : float, Ohm
         Typical impedance of the data (places added elements such as a core-loss resistor).
+    prior : DesignPrior, optional
+        Log-normal prior of the circuit values around the design (:mod:`.prior`);
+        its penalty is added to the residuals.
     """
 
     def __init__(
@@ -171,6 +189,7 @@ class FrequencyFit:
         fixed: Sequence[str] = (),
         effects: Sequence[Effect] = (),
         scale: float = 1.0,
+        prior: DesignPrior | None = None,
     ):
         self.effects = list(effects)
         self.configurations = list(configurations)
@@ -218,6 +237,40 @@ class FrequencyFit:
                 f"too few points: {self.f.size} frequencies for {self.nc + len(self.extra)} parameters"
             )
         self._cache: tuple[bytes, list[np.ndarray], dict] | None = None
+        self.prior = prior
+        self._kernel: np.ndarray | None = None
+        self._pidx = np.zeros(0, int)
+        self._plog = np.zeros(0)
+        self._pscale = 0.0
+        if prior is not None:
+            anchored = prior.anchored(self.circuit)
+            idx = [i for i, n in enumerate(self.free) if n.lower() in anchored]
+            self._pidx = np.array(idx, int)
+            self._plog = np.array([np.log(self.start[i] / prior.design[self.free[i].lower()]) for i in idx])
+            self._pscale = prior.scale() / np.sqrt(2.0)  # the data residuals' squares sum to half the cost
+
+    def smooth(self, decades: float) -> None:
+        """Compare the log errors smoothed along log-frequency (Gaussian, ``decades`` wide; 0: not smoothed).
+
+        A resonance of the model a few per cent away from the measured one
+        gives a log error shaped like a dipole, whose cost hardly changes as
+        the resonance moves until it overlaps the measured one: a local fit
+        stalls. Smoothed over more than the offset, the dipole becomes
+        proportional to the offset, and the fit moves the resonance onto the
+        measured one. Fits from smoothed to unsmoothed errors (continuation)
+        reach optima a local fit of the raw errors misses.
+        """
+        if not decades > 0:
+            self._kernel = None
+            return
+        lf = np.log10(self.f)
+        k = np.exp(-0.5 * ((lf[:, None] - lf[None, :]) / decades) ** 2)
+        self._kernel = (k / k.sum(axis=1, keepdims=True)).T
+
+    def prior_residuals(self, X: np.ndarray) -> np.ndarray:
+        """The design prior's residuals, shape ``(P, n_anchored)`` (squares sum to half the penalty, as the data's
+        sum to half the cost)."""
+        return (self._plog + X[:, self._pidx]) * self._pscale
 
     # ------------------------------------------------------------------ model
     def overrides(self, x: np.ndarray) -> dict[str, float]:
@@ -291,7 +344,11 @@ class FrequencyFit:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             for n, meas in self.measured.items():
                 e = np.log(pred[n] / meas)
+                if self._kernel is not None:
+                    e = np.where(np.isfinite(e), e, 0) @ self._kernel
                 parts.append(np.concatenate([e.real, e.imag], axis=1) / np.sqrt(2 * meas.size))
+        if self._pidx.size:
+            parts.append(self.prior_residuals(X))
         r = np.concatenate(parts, axis=1)
         return np.where(np.isfinite(r), r, 1e3)
 
@@ -400,6 +457,35 @@ class FrequencyFit:
         assert best_x is not None
         return self.result(best_x, cause, nfev, time.perf_counter() - t0)
 
+    def fit_continued(self, x0: np.ndarray, stages: Sequence[float] = CONTINUATION, stage_nfev: int = 30,
+                      max_nfev: int = 100, circuit_free: bool = True, tol: float = 1e-8) -> FitResult:
+        """A local fit from ``x0`` through errors smoothed less and less (:meth:`smooth`), then the raw errors.
+
+        Parameters
+        ----------
+        x0 : numpy.ndarray
+            Start vector.
+        stages : sequence of float
+            Smoothing widths, decades, widest first.
+        stage_nfev, max_nfev : int
+            Evaluations per smoothed stage and of the final fit.
+        """
+        t0 = time.perf_counter()
+        x = np.asarray(x0, float)
+        nfev = 0
+        try:
+            for w in stages:
+                self.smooth(w)
+                r = self.fit(x0s=x[None], grid=False, keep_starts=1, max_nfev=stage_nfev, circuit_free=circuit_free,
+                             tol=1e-6)
+                x, nfev = r.x, nfev + r.nfev
+        finally:
+            self.smooth(0)
+        r = self.fit(x0s=x[None], grid=False, keep_starts=1, max_nfev=max_nfev, circuit_free=circuit_free, tol=tol)
+        r.nfev += nfev
+        r.wall_s = time.perf_counter() - t0
+        return r
+
     def result(self, x: np.ndarray, cause: str | None = None, nfev: int = 0, wall: float = 0.0) -> FitResult:
         pred = self.predict(x)
         err = self.errors(pred)
@@ -410,10 +496,11 @@ class FrequencyFit:
         params = self.extra_values(x)
         causes = [e.cause for e in self.effects]
         extra = params[0] if len(params) == 1 else {e.cause: p for e, p in zip(self.effects, params)}
+        penalty = 2 * float(np.sum(self.prior_residuals(np.atleast_2d(x)) ** 2)) if self._pidx.size else 0.0
         return FitResult(
             cause=cause or ("+".join(causes) if causes else "none"),
             circuit=self.circuit, values=self.overrides(x), extra=extra,
             cost=cost, rss=rss, n_residuals=n_res, n_params=self.nc + len(self.extra),
             predicted=pred, errors=err, nfev=nfev, wall_s=wall, causes=causes, effects=list(self.effects),
-            params=params, x=np.asarray(x, float),
+            params=params, x=np.asarray(x, float), penalty=penalty, penalty_rss=penalty * self.f.size,
         )

@@ -71,6 +71,28 @@ def _fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
+def drift_lines(data: dict) -> list[str]:
+    """Markdown: the design tolerance and the values the final fit moved beyond it (the drift table)."""
+    tol = data.get("tolerance", float("inf"))
+    if tol is None or not np.isfinite(tol):
+        return ["Values fitted freely (no design tolerance).", ""]
+    lines = ["## Drift from the design", ""]
+    drift = data.get("drift") or []
+    if not drift:
+        lines += [f"Every value of the final model is within the design tolerance ({tol:.0%}).", ""]
+    else:
+        lines += [f"Values the final model moved beyond the design tolerance ({tol:.0%}): the design value is wrong, "
+                  "or the model lacks an effect these values absorb.", "",
+                  "| value | design | fitted | ratio |", "|---|---|---|---|"]
+        lines += [f"| {d['name']} | {_fmt(d['design'])} | {_fmt(d['fitted'])} | {d['ratio']:.3g} |" for d in drift]
+        lines.append("")
+    base = data.get("baseline_drift") or []
+    if base and data.get("causes"):
+        lines += ["Without the causes named, the baseline needed: "
+                  + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in base) + ".", ""]
+    return lines
+
+
 def write_report(diag: Diagnosis, directory: str | Path, source: str = "") -> Path:
     """Write ``report.md``, ``fits.png``, ``residuals.png``, ``diagnosis.json`` (and the extended netlist).
 
@@ -101,9 +123,17 @@ def write_report(diag: Diagnosis, directory: str | Path, source: str = "") -> Pa
     (out / "diagnosis.json").write_text(json.dumps(data, indent=1, default=float))
     ev = diag.evidence
     lines = [f"# Diagnosis{': ' + source if source else ''}", ""]
-    lines += [f"**Cause: `{diag.cause}`** — gain {diag.gain:.3f} (fraction of the baseline cost removed on the measured data).", ""]
-    lines += [f"Baseline: `{ev.get('baseline_model', '')}`, cost {_fmt(diag.baseline.cost)}; "
-              f"extended cost {_fmt(diag.best.cost) if diag.best else '-'}. Selection: {ev.get('criterion', '')}.", ""]
+    prior = np.isfinite(data.get("tolerance", np.inf) or np.inf)
+    lines += [f"**Cause: `{diag.cause}`** — gain {diag.gain:.3f} (fraction of the baseline cost removed on the measured "
+              "data" + (", each cost counting the design prior's penalty" if prior else "") + ").", ""]
+    pen = (f" + prior penalty {_fmt(diag.baseline.penalty)}" if prior else "")
+    pen_ext = (f" + {_fmt(diag.best.penalty)}" if prior and diag.best else "")
+    lines += [f"Baseline: `{ev.get('baseline_model', '')}`, cost {_fmt(diag.baseline.cost)}{pen}; "
+              f"extended cost {_fmt(diag.best.cost) + pen_ext if diag.best else '-'}; noise floor "
+              f"{_fmt(diag.noise.get('cost', 0.0))}. Selection: {ev.get('criterion', '')}.", ""]
+    if data.get("causes") and len(data["causes"]) > 1:
+        lines += ["Causes named, in order: " + ", ".join(f"`{c}`" for c in data["causes"]) + ".", ""]
+    lines += drift_lines(data)
     loc = ev.get("localisation", {})
     if loc:
         shares = ", ".join(f"{k} {v:.0%}" for k, v in sorted(loc["shares"].items(), key=lambda kv: -kv[1]) if v > 0.005)

@@ -95,6 +95,8 @@ UNITS = {"v_in": "V", "i_in": "A"}
 
 #: Fewest samples accepted.
 MIN_SAMPLES = 64
+#: Selection stops once the cost is within this factor of the noise floor (as for frequency data).
+NOISE_MARGIN = 1.25
 #: A baseline whose normalised MSE exceeds this for either signal "does not fit at all" (residual RMS
 #: 28 % of the signal's standard deviation; a 2x error in L or C gives about 0.06, 10x errors 0.1-0.8).
 MAX_BASELINE_NMSE = 0.08
@@ -354,6 +356,31 @@ def _lc_from_ringing(f_obs: np.ndarray, z0: np.ndarray, csnub: float, lpris: flo
     return z2 * csw, csw
 
 
+class _Combined(_Candidate):
+    """Several extensions together: their parameters side by side, their element values merged."""
+
+    def __init__(self, parts: Sequence[_Candidate]):
+        super().__init__("+".join(p.cause for p in parts), tuple(n for p in parts for n in p.names),
+                         tuple(v for p in parts for v in p.lower), tuple(v for p in parts for v in p.upper),
+                         any(p.ringing for p in parts))
+        self.parts = list(parts)
+
+    def _slices(self) -> list[slice]:
+        edges = np.cumsum([0] + [len(p.names) for p in self.parts])
+        return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+
+    def overrides(self, th: np.ndarray, nominal: Mapping[str, float],
+                  snubber: tuple[float, float]) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        for p, sl in zip(self.parts, self._slices()):
+            out.update(p.overrides(th[:, sl], nominal, snubber))
+        return out
+
+    def extra(self, th: np.ndarray, nominal: Mapping[str, float], snubber: tuple[float, float]) -> dict[str, Any]:
+        th = np.asarray(th, float)
+        return {p.cause: p.extra(th[sl], nominal, snubber) for p, sl in zip(self.parts, self._slices())}
+
+
 def _candidates(fmin_ring: float, fmax_ring: float) -> list[_Candidate]:
     out = [
         _Candidate("series-resistance", ("ln_r_scale",), (math.log(0.5),), (math.log(20.0),)),
@@ -409,6 +436,7 @@ class WaveformFit:
     theta: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
     nfev: int = 0
     wall_s: float = 0.0
+    causes: list[str] = field(default_factory=list)
 
     @property
     def bic(self) -> float:
@@ -567,6 +595,7 @@ class _Problem:
             values["rsnub"], values["csnub"] = self.snubber
         n_par = len(cand.names) + (self.r_load_fixed is None) + (x0.shape[1] if self.fit_x0 else 0)
         return WaveformFit(
+            causes=[p.cause for p in getattr(cand, "parts", [cand])] if cand.cause != "none" else [],
             cause=cand.cause, values=values, extra=cand.extra(ext[0], self.nominal, self.snubber) if ext.size else {},
             cost=cost, cost_per_signal=per, rss=float(np.sum(e ** 2) * self.K), n_residuals=2 * self.K,
             n_params=int(n_par), predicted={s: pred[0][:, j] for j, s in enumerate(SIGNALS)}, x0=x0[0],
@@ -780,10 +809,14 @@ class WaveformDiagnosis:
     nominal: dict[str, float]
     evidence: dict[str, Any] = field(default_factory=dict)
     wall_s: float = 0.0
+    causes: list[str] = field(default_factory=list)
+    steps: list[dict[str, Any]] = field(default_factory=list)
+    noise: dict[str, Any] = field(default_factory=dict)
+    unexplained: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def gain(self) -> float:
-        """Fraction of the baseline cost removed by the named extension (0 for ``none``)."""
+        """Fraction of the baseline cost removed by the named extensions (0 for ``none``)."""
         return 0.0 if self.best is None else 1 - self.best.cost / self.baseline.cost
 
     @property
@@ -797,12 +830,18 @@ class WaveformDiagnosis:
                  "wall_s": r.wall_s} for r in self.fits]
 
     def as_json(self) -> dict[str, Any]:
-        """The keys of the ``diagnose`` command (``cause``, ``candidates``, ``baseline_cost``,
-        ``extended_cost``, ``gain``) plus the fitted values and the evidence."""
+        """The keys of the ``diagnose`` command, as for frequency data (``cause``, ``causes``, ``steps``,
+        ``candidates``, ``unexplained``, ``noise_floor``, ``gain``, ``baseline_cost``, ``extended_cost``) plus the
+        fitted values and the evidence."""
         ext = self.extended
         return {
             "cause": self.cause,
+            "causes": list(self.causes),
+            "steps": list(self.steps),
             "candidates": self.candidates(),
+            "unexplained": list(self.unexplained),
+            "noise_floor": self.noise.get("cost", 0.0),
+            "noise": self.noise,
             "baseline_cost": self.baseline.cost,
             "extended_cost": ext.cost,
             "gain": self.gain,
@@ -866,6 +905,8 @@ def diagnose_waveforms(
     csnub: float = 0.0,
     min_delta_bic: float = 10.0,
     min_gain: float = 0.2,
+    min_step_gain: float = 0.2,
+    max_causes: int = 3,
     fit_initial_state: bool = True,
     edge_timing: str = "auto",
     progress: bool = True,
@@ -890,6 +931,10 @@ def diagnose_waveforms(
         the ``switch-ringing`` extension; it has no effect on an ideal bridge).
     min_delta_bic, min_gain : float
         Thresholds for naming a cause instead of ``none``.
+    min_step_gain : float
+        Fraction of the remaining cost a further cause must remove.
+    max_causes : int
+        Most causes named.
     fit_initial_state : bool
         Fit the source's initial state (default); else start from rest.
     edge_timing : ``auto`` or ``sample``
@@ -1001,14 +1046,46 @@ def diagnose_waveforms(
         _log(f"{cand.cause}: cost {res.cost:.4g}, gain {1 - res.cost / baseline.cost:.3f}, nfev {res.nfev}, "
              f"dBIC {baseline.bic - res.bic:.1f} ({res.wall_s:.1f} s)", progress)
 
-    # ---- selection
-    best = min(results, key=lambda r: r.bic) if results else None
-    chosen = None
-    if best is not None and significant(baseline.bic, baseline.cost, best.bic, best.cost, min_delta_bic, min_gain):
-        chosen = best
+    # ---- forward selection: the best cause by BIC, then each other cause refitted together with those named
+    noise = waveform_noise(w)
+    parts = {c.cause: c for c in _candidates(fmin_ring, fmax_ring)}
+    singles = {r.cause: r for r in results}
+    current, chosen, steps = baseline, None, []
+    pool = dict(singles)
+    while pool and len(current.causes) < max_causes:
+        if current.cost <= NOISE_MARGIN * noise["cost"]:
+            _log("cost at the noise floor: no further cause", progress)
+            break
+        best = min(pool.values(), key=lambda r: r.bic)
+        need = min_gain if chosen is None else min_step_gain
+        if not significant(current.bic, current.cost, best.bic, best.cost, min_delta_bic, need):
+            break
+        new = next(c for c in best.causes if c not in current.causes)
+        steps.append({"cause": new, "gain": 1 - best.cost / current.cost, "delta_bic": current.bic - best.bic,
+                      "cost": best.cost, "total_gain": 1 - best.cost / baseline.cost, "model": best.cause})
+        _log(f"step {len(steps)}: {new} (gain {steps[-1]['gain']:.3f}, dBIC {steps[-1]['delta_bic']:.1f})", progress)
+        current = chosen = best
+        pool = {}
+        if current.cost <= NOISE_MARGIN * noise["cost"] or len(current.causes) >= max_causes:
+            break
+        for cause, single in singles.items():
+            if cause in current.causes:
+                continue
+            t = time.perf_counter()
+            cand = _Combined([parts[c] for c in current.causes] + [parts[cause]])
+            n_head = 0 if r_load is not None else 1
+            start = np.concatenate([current.theta, single.theta[n_head:]])
+            fitter = prob if cand.ringing else None
+            res = (prob.fit(cand, [start], max_nfev=30) if fitter is not None else two_stage(cand, [start]))
+            res.wall_s = time.perf_counter() - t
+            _log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.cost / current.cost:.3f}, "
+                 f"dBIC {current.bic - res.bic:.1f} ({res.wall_s:.1f} s)", progress)
+            if res.cost < current.cost:
+                pool[cause] = res
     measured = {s: getattr(w, s) for s in SIGNALS}
-    diag = WaveformDiagnosis(chosen.cause if chosen else "none", baseline, chosen, results, w.time_s, u, measured,
-                             nominal)
+    diag = WaveformDiagnosis(chosen.causes[0] if chosen else "none", baseline, chosen, results, w.time_s, u,
+                             measured, nominal, causes=list(chosen.causes) if chosen else [], steps=steps, noise=noise)
+    diag.unexplained = _unexplained(diag.extended, measured, noise)
     e_after = None
     if chosen is not None:
         e_after = np.stack([(chosen.predicted[s] - measured[s]) / prob.sigma[j] for j, s in enumerate(SIGNALS)], axis=1)
@@ -1033,19 +1110,75 @@ def diagnose_waveforms(
         "ringing_search_band_hz": [fmin_ring, fmax_ring] if fmax_ring > 1.2 * fmin_ring else None,
         "gain_per_signal": ({s: 1 - chosen.cost_per_signal[s] / baseline.cost_per_signal[s] for s in SIGNALS}
                             if chosen else {}),
-        "criterion": (f"lowest BIC = N ln(RSS/N) + k ln N (N = 2 x samples, normalised residuals; k counts the load, "
-                      f"the extension and the initial states); named only if dBIC >= {min_delta_bic} and "
-                      f"gain >= {min_gain}"),
+        "criterion": (f"forward selection by BIC = N ln(RSS/N) + k ln N (N = 2 x samples, normalised residuals; k "
+                      f"counts the load, the extensions and the initial states): a cause is named if dBIC >= "
+                      f"{min_delta_bic} and it removes at least {min_gain} (first cause) or {min_step_gain} (further "
+                      f"causes) of the cost left; stop at {NOISE_MARGIN} x the noise floor"),
     }
-    if chosen is not None and chosen.cause == "switch-ringing":
-        diag.evidence["ringing"] = _ringing_evidence(chosen)
+    if chosen is not None and "switch-ringing" in chosen.causes:
+        ring = chosen.extra if chosen.cause == "switch-ringing" else chosen.extra["switch-ringing"]
+        diag.evidence["ringing"] = _ringing_evidence(ring)
     diag.wall_s = time.perf_counter() - t_start
     _log(f"cause: {diag.cause} (gain {diag.gain:.3f}) in {diag.wall_s:.1f} s", progress)
     return diag
 
 
-def _ringing_evidence(fit: WaveformFit) -> dict[str, Any]:
-    x = fit.extra
+#: Order of the linear prediction that annihilates the source's own response between switching edges.
+NOISE_LP_ORDER = 8
+
+
+def waveform_noise(w: Waveforms, order: int = NOISE_LP_ORDER) -> dict[str, Any]:
+    """The cost a perfect model would still have, from the record itself.
+
+    Between two switching edges a linear source driven by a constant level
+    responds as a sum of a few (damped, possibly ringing) exponentials and a
+    constant, which a linear recurrence of order ``order`` (at least the
+    number of the source's states plus one) predicts exactly. The recurrence
+    is fitted by least squares to the samples away from the edges; what it
+    leaves is the noise passed through the prediction-error filter
+    ``(1, -a_1, ..., -a_p)``, of variance ``sigma^2 (1 + sum a_i^2)``. The
+    median of the squared residuals over ``0.455`` (the median of a
+    chi-square with one degree of freedom) is robust against outliers. The
+    floor is ``sum_s sigma_s^2 / var(y_s)`` in cost units.
+    """
+    u = np.asarray(w.v_bprbs, float)
+    keep = np.ones(u.size, bool)
+    keep[:order] = False
+    for k in _edges(u):
+        keep[k:k + order + 2] = False
+    rows = np.flatnonzero(keep)
+    per, cost = {}, 0.0
+    for s in SIGNALS:
+        y = np.asarray(getattr(w, s), float)
+        sigma2 = 0.0
+        if rows.size > 4 * order:
+            X = np.stack([y[rows - i] for i in range(1, order + 1)], axis=1)
+            a, *_ = np.linalg.lstsq(X, y[rows], rcond=None)
+            r = y[rows] - X @ a
+            sigma2 = float(np.median(r * r) / 0.4549364 / (1 + np.sum(a * a)))
+        var = float(np.var(y)) or 1.0
+        per[s] = math.sqrt(sigma2)
+        cost += sigma2 / var
+    return {"cost": cost, "per_signal": per,
+            "method": f"linear prediction of order {order} between switching edges; median of the squared "
+                      "prediction error / 0.455, corrected for the prediction filter's noise gain"}
+
+
+def _unexplained(fit: WaveformFit, measured: Mapping[str, np.ndarray], noise: Mapping[str, Any],
+                 factor: float = 2.0) -> list[dict[str, Any]]:
+    """Signals whose residual RMS still stands ``factor`` times above the noise RMS."""
+    out = []
+    for s in SIGNALS:
+        e = fit.predicted[s] - measured[s]
+        rms = float(np.sqrt(np.mean(e * e)))
+        sigma = max(float(noise["per_signal"].get(s, 0.0)), 1e-300)
+        if rms > factor * sigma:
+            out.append({"signal": s, "unit": UNITS[s], "rms": rms, "noise_rms": sigma, "above_noise": rms / sigma})
+    out.sort(key=lambda b: -b["above_noise"])
+    return out
+
+
+def _ringing_evidence(x: Mapping[str, float]) -> dict[str, Any]:
     out = {"f_ring_hz": x["f_ring_hz"], "lsw_h": x["lsw_h"], "csw_f": x["csw_f"],
            "relation": "f_r = 1 / (2 pi sqrt(Lsw Csw)), thesis (5.1)"}
     if "f_ring_snubbed_hz" in x:
@@ -1136,6 +1269,15 @@ def write_report(diagnosis: WaveformDiagnosis, directory: str | os.PathLike) -> 
     figs = _plots(d, out)
     lines = ["# Waveform diagnosis of the PRIS source", ""]
     lines += [f"**Cause: `{d.cause}`** (gain {d.gain:.3f}: fraction of the baseline cost removed)", ""]
+    if len(d.causes) > 1:
+        lines += ["Causes named, in order: " + "; ".join(
+            f"`{st['cause']}` (gain {st['gain']:.3f} of the cost left, dBIC {st['delta_bic']:.1f})" for st in d.steps)
+                  + ".", ""]
+    if d.noise:
+        lines += [f"Noise floor {d.noise['cost']:.3g} (cost units); the final model's cost "
+                  f"{d.extended.cost:.3g}" + (": " + ", ".join(f"{u['signal']} residual {u['above_noise']:.1f} x "
+                                                                 "the noise" for u in d.unexplained)
+                                               if d.unexplained else ", at the noise") + ".", ""]
     lines += ["Nominal source: " + ", ".join([f"R_pris = {_fmt(d.nominal['rpris'], 'Ohm')}",
                                              f"L_pris = {_fmt(d.nominal['lpris'], 'H')}",
                                              f"C_pris = {_fmt(d.nominal['cpris'], 'F')}"])
@@ -1199,7 +1341,8 @@ def _plots(d: WaveformDiagnosis, out: Path) -> list[str]:
     scores = [float(np.sum(err[e:e + bit])) for e in edges]
     e0 = int(edges[int(np.argmax(scores))]) if edges.size else 0
     ext = d.extended
-    f_ring = d.best.extra.get("f_ring_observed_hz") if d.best is not None else None
+    extra = {} if d.best is None else d.best.extra.get("switch-ringing", d.best.extra)
+    f_ring = extra.get("f_ring_observed_hz")
     short = max(int(round(5 / f_ring / h)), 20) if f_ring else max(bit // 8, 20)
     windows = [(max(0, e0 - bit // 10), min(t.size, e0 + bit)),
                (max(0, e0 - max(short // 8, 2)), min(t.size, e0 + short))]

@@ -1,0 +1,107 @@
+"""Diagnosis against a design: the design values as a prior, drift reported, causes sought from the design.
+
+The three examples in ``pris_cosim/data/diagnosis_examples`` were made by an
+independent nodal solver (not pris-cosim) with 0.3 % complex noise; their
+truth is in ``cases.json`` (see the README there).
+"""
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pris_cosim
+from estimation.diagnosis import diagnose_frequency
+from estimation.diagnosis.fit import FrequencyFit
+from estimation.diagnosis.prior import design_prior
+from pris_cosim.frf import Response
+from pris_cosim.measured import load_measured
+from pris_cosim.models import Configuration
+from pris_cosim.netlist import parse_netlist, read_netlist
+
+DATA = Path(pris_cosim.__file__).parent / "data" / "diagnosis_examples"
+CASES = {c["data"].removesuffix(".csv"): c for c in json.loads((DATA / "cases.json").read_text())["cases"]}
+
+
+def _diagnose(name, **kw):
+    m = load_measured(str(DATA / f"{name}.csv"))
+    return diagnose_frequency(m.frequency_hz, m.responses, circuit=read_netlist(str(DATA / "design_cascade5.cir")),
+                              port="n1", progress=False, **kw)
+
+
+def _check(d, name):
+    case = CASES[name]
+    assert d.causes == case["truth_causes"], (d.causes, d.candidates())
+    assert sorted(x["name"] for x in d.drift) == sorted(case["truth_drift"]), d.drift
+    assert all(x["ratio"] > 1.2 or x["ratio"] < 1 / 1.2 for x in d.drift)
+
+
+def test_within_tolerance_gives_no_cause_and_no_drift():
+    d = _diagnose("within_tolerance")
+    _check(d, "within_tolerance")
+    assert d.baseline.cost <= 1.25 * d.noise["cost"]
+    assert d.as_json()["tolerance"] == 0.2
+
+
+@pytest.mark.slow
+def test_doubled_capacitance_is_drift_not_a_cause():
+    d = _diagnose("c3_doubled")
+    _check(d, "c3_doubled")
+    c3 = d.drift[0]
+    assert c3["design"] == pytest.approx(0.85e-9) and c3["ratio"] > 1.4
+
+
+@pytest.mark.slow
+def test_skin_effect_named_from_the_design_values(tmp_path):
+    from estimation.diagnosis.report import write_report
+
+    d = _diagnose("within_tolerance_skin")
+    _check(d, "within_tolerance_skin")
+    assert d.baseline_drift, "the baseline alone needs resistances far from the design"
+    assert any(x["name"].upper().startswith("R") and x["ratio"] > 1.5 for x in d.baseline_drift)
+    assert d.best.cost <= 1.25 * d.noise["cost"] and d.gain > 0.2
+    text = write_report(d, tmp_path / "rep", source="within_tolerance_skin").read_text()
+    assert "Drift from the design" in text and "skin-effect" in text
+
+
+def test_prior_penalty_is_the_log_normal_in_nats():
+    """Penalty of a fit against ``sum ln^2(v/d) / (2 tau^2)`` written out here, in cost units."""
+    net = parse_netlist("* two sections\nR1 n1 x1 1\nL1 x1 n2 1m\nC1 n1 0 1n\nR2 n2 x2 2\nL2 x2 0 2m\nC2 n2 0 1n\n")
+    f = np.logspace(3, 6, 50)
+    z = np.full(f.size, 10.0 + 1j)
+    cfg = [Configuration("default", "n1", (), (Response("Zin"),))]
+    free = FrequencyFit(net, cfg, f, {"Zin": z})
+    design = dict(zip(free.free, free.start))
+    prior = design_prior(design, 0.2, noise_cost=1e-4, n_frequencies=f.size, n_responses=1, circuit=net)
+    fit = FrequencyFit(net, cfg, f, {"Zin": z}, prior=prior)
+    x = np.zeros(fit.nc)
+    x[fit.free.index("R1")], x[fit.free.index("R2")] = math.log(1.5), math.log(0.5)
+    r = fit.result(x)
+    nats = (math.log(1.5) ** 2 + math.log(0.5) ** 2) / (2 * math.log(1.2) ** 2)
+    assert r.penalty == pytest.approx(1e-4 / f.size * nats, rel=1e-9)
+    assert r.objective == pytest.approx(r.cost + r.penalty)
+    drifted = prior.drift(r.values)
+    assert [d["name"] for d in drifted] == ["R2", "R1"] and drifted[1]["ratio"] == pytest.approx(1.5)
+    # free values (tolerance inf): no prior at all
+    assert design_prior(design, math.inf, 1e-4, f.size, 1) is None
+
+
+def test_cli_reads_tolerance_and_values_with_suffixes(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "pris_cosim", "diagnose", "--measured",
+                           str(DATA / "within_tolerance.csv"), "--netlist", str(DATA / "design_cascade5.cir"),
+                           "--port", "n1", "--tolerance", "0.2", "--json"], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["cause"] == "none" and out["drift"] == [] and out["tolerance"] == 0.2
+    from estimation.diagnosis.cli import _tolerance, _value
+
+    assert _value("4m") == pytest.approx(4e-3) and _value("1u") == pytest.approx(1e-6) and _value("1e-6") == 1e-6
+    assert math.isinf(_tolerance("inf")) and _tolerance("20%") == pytest.approx(0.2)
+    bad = subprocess.run([sys.executable, "-m", "pris_cosim", "diagnose", "--measured", "x.csv", "--tolerance", "-1"],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "--tolerance" in bad.stderr and "Traceback" not in bad.stderr
