@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from estimation.diagnosis.fit import DiagnosisError
-from estimation.diagnosis.waveform import _simulate_one, _Input, _Structure, diagnose_waveforms, write_report
+from estimation.diagnosis.waveform import _Input, _simulate_one, _Structure, diagnose_waveforms
+from estimation.diagnosis.waveform_report import write_report
 from estimation.diagnosis.waveform_synthetic import NOMINAL, simulate_source, thesis_case, waveform_case
 from pris_cosim.measured import Waveforms, write_waveform_csv
 

@@ -116,7 +116,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         if None in (args.rpris, args.lpris, args.cpris):
             raise DiagnosisError("waveform data needs the nominal source values --rpris --lpris --cpris (the source "
                                  "check on a resistive load), or --model / --netlist (a winding in the record)")
-        from .waveform import diagnose_waveforms, write_report as write_waveform_report
+        from .waveform import diagnose_waveforms
+        from .waveform_report import write_report as write_waveform_report
 
         diag = diagnose_waveforms(data, args.rpris, args.lpris, args.cpris, r_load=args.rload, progress=True)
         if args.report:
