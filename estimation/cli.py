@@ -54,7 +54,8 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
     A ``"netlist": FILE`` with ``"port": NODE`` replaces ``"model"`` (parameters: element or
     ``.param`` names). An ``"fmu": FILE`` config (FMI 2.0/3.0 Co-Simulation in the loop, keys
     ``input``, ``output``, ``outputs``, ``current``, ``parameters``, ``ties``, ``target``,
-    ``approach``, ``budget``, ``substeps``, ``diff_step``, ``first_window``, ``seed``) goes to
+    ``approach``, ``budget``, ``substeps``, ``diff_step``, ``first_window``, ``seed``, ``values``,
+    ``input_hold``) goes to
     :mod:`estimation.fmu_estimate`; ``--out DIR``, ``--scheduler``, ``--workers`` apply to it.
 
     Defaults (``estimation.estimate``): GA + L-BFGS-B sized to the number of
@@ -247,7 +248,7 @@ def load_config(path: str | Path) -> dict[str, Any]:
     known = {"model", "netlist", "port", "parameters", "ties", "target", "approach", "responses", "frequency", "source", "fs",
              "duration", "cost", "optimiser", "options", "budget", "seed", "configuration", "drive", "fmu", "input",
              "output", "outputs", "current", "substeps", "diff_step", "first_window", "design_score",
-             "window_growth"}
+             "window_growth", "values", "input_hold"}
     unknown = sorted(set(cfg) - known)
     if unknown:
         raise EstimationInputError(f"config key {unknown[0]!r} is not known (known: {', '.join(sorted(known))})")

@@ -61,12 +61,14 @@ from typing import Any
 import numpy as np
 
 from .fmu_model import FmuSetupError, fmu_variables
-from .fmu_problem import APPROACHES, problem
+from .fmu_problem import APPROACHES, problem, read_record
+from .holds import HOLDS, decide_hold
 
 __all__ = ["make_setup", "run_fmu_estimate", "design_task", "restart_task"]
 
 KNOWN = {"fmu", "input", "output", "outputs", "current", "parameters", "ties", "target", "approach", "frequency",
-         "budget", "substeps", "diff_step", "seed", "first_window", "design_score", "window_growth"}
+         "budget", "substeps", "diff_step", "seed", "first_window", "design_score", "window_growth", "values",
+         "input_hold"}
 
 
 def _bad(text: str) -> FmuSetupError:
@@ -90,8 +92,9 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
         if key in cfg and (not isinstance(cfg[key], kind) or isinstance(cfg[key], bool)):
             raise _bad(f"config key {key!r} has the wrong type ({type(cfg[key]).__name__})")
     for key, value in dict(cfg.get("budget", {})).items():
-        if key not in ("design", "restarts", "simulations") or not isinstance(value, int) or value < 1:
-            raise _bad(f"config key 'budget': {key!r} must be one of design, restarts, simulations, a positive integer")
+        if key not in ("design", "restarts", "simulations", "candidates") or not isinstance(value, int) or value < 1:
+            raise _bad(f"config key 'budget': {key!r} must be one of design, candidates, restarts, simulations, "
+                       "a positive integer")
     if "diff_step" in cfg and not 0 < float(cfg["diff_step"]) < 0.5:
         raise _bad("config key 'diff_step' must lie in (0, 0.5)")
     if "substeps" in cfg and cfg["substeps"] < 1:
@@ -99,8 +102,8 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
     growth = cfg.get("window_growth", 2.0)
     if not isinstance(growth, (int, float)) or isinstance(growth, bool) or not 1.05 <= growth <= 16:
         raise _bad("config key 'window_growth' must be a number from 1.05 to 16")
-    if cfg.get("design_score", "window") not in ("window", "frequency"):
-        raise _bad("config key 'design_score' must be 'window' or 'frequency'")
+    if cfg.get("design_score", "auto") not in ("auto", "response", "window", "frequency"):
+        raise _bad("config key 'design_score' must be 'auto', 'response', 'window' or 'frequency'")
     if "first_window" in cfg and cfg["first_window"] < 0:
         raise _bad("config key 'first_window' must be 0 (automatic) or a number of samples")
 
@@ -150,6 +153,20 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
         if scale not in ("log", "linear") or (scale == "log" and lo <= 0):
             raise _bad(f"parameter {name!r}: scale must be 'linear', or 'log' with min > 0")
         params[name] = [lo, hi, scale]
+    fixed = cfg.get("values", {})
+    if not isinstance(fixed, dict):
+        raise _bad("config key 'values' must map FMU parameters to numbers")
+    for name, value in fixed.items():
+        v = variables.get(name)
+        if v is None or v.causality != "parameter" or v.type not in ("Real", "Float64"):
+            raise _bad(f"config key 'values': {name!r} is not a real parameter of {Path(fmu).name}")
+        if name in params or name in ties:
+            raise _bad(f"config key 'values': {name!r} is also in {'parameters' if name in params else 'ties'}")
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(float(value)):
+            raise _bad(f"config key 'values': {name!r} must be a finite number (got {value!r})")
+    hold = cfg.get("input_hold", "auto")
+    if hold not in HOLDS:
+        raise _bad(f"config key 'input_hold' must be one of {', '.join(HOLDS)} (got {hold!r})")
     tgt = cfg.get("target")
     if not isinstance(tgt, dict) or tgt.get("kind", "waveforms-csv") != "waveforms-csv":
         raise _bad("config key 'target' must be {\"kind\": \"waveforms-csv\", \"path\": FILE} with an FMU")
@@ -158,72 +175,161 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
              "parameters": params, "ties": dict(ties), "target": path_of(tgt.get("path"), "target.path"),
              "approach": approach, "frequency": dict(cfg.get("frequency", {})),
              "substeps": int(cfg.get("substeps", 2)), "diff_step": float(cfg.get("diff_step", 1e-5)),
-             "first_window": int(cfg.get("first_window", 0)), "design_score": cfg.get("design_score", "window"),
-             "window_growth": float(cfg.get("window_growth", 2.0))}
+             "first_window": int(cfg.get("first_window", 0)), "design_score": cfg.get("design_score", "auto"),
+             "window_growth": float(cfg.get("window_growth", 2.0)),
+             "values": {k: float(v) for k, v in fixed.items()}}
     if not Path(setup["target"]).is_file():
         raise _bad(f"target file not found: {tgt.get('path')}")
+    if inp is None:
+        setup["input_hold"], setup["hold_reason"] = None, "no input: the FMU makes its own drive"
+    elif hold == "auto":
+        setup["input_hold"], setup["hold_reason"] = decide_hold(read_record(setup["target"], [inp])[inp], inp)
+    else:
+        setup["input_hold"], setup["hold_reason"] = hold, "set in the config ('input_hold')"
     problem(setup)  # reads the record and instantiates the FMU here: every setup error now, in one line
     return setup
 
 
 # ---------------------------------------------------------------------- tasks (run in worker processes)
+#: Welch segments of the response stages, as fractions of the record: coarse (smooth) first, then fine.
+RESPONSE_SEGMENTS = (8, 2)
+#: A stage stops when its best cost fell by less than this fraction over its last ``STALL_SPAN (n + 1)`` runs.
+STALL_FRACTION = 1e-4
+STALL_SPAN = 4
+#: Screened candidates go on only when their screen cost is within this factor of the best one's.
+SCREEN_RATIO = 1.5
+
+
+def response_segments(pb: Any) -> list[int]:
+    """Welch segment lengths (samples) of the response stages the record supports (may be empty)."""
+    out = []
+    for m in RESPONSE_SEGMENTS:
+        nper = pb.n // m
+        if nper >= 64 and pb.response_target(nper) is not None and nper not in out:
+            out.append(nper)
+    return out
+
+
+def stages_of(pb: Any, part: str = "all") -> list[tuple[str, int | None]]:
+    """The stages of a restart: ``(residual, window)`` pairs, in order.
+
+    1. ``("time", w)``: the time residual over doubling first windows of the
+       record; the windows up to a 32nd of the record are the *screen*
+       (``part="screen"``): cheap, run from many candidates, whose end costs
+       tell a start in the right basin (it fits the window to the noise) from
+       one in a wrong one;
+    2. the longer windows, the whole record's time residual, and the approach's
+       own residual over the whole record (``part="rest"``).
+    """
+    wins = pb.windows()
+    cut = max(wins[0] if wins else 0, pb.n // 32)
+    screen: list[tuple[str, int | None]] = [("time", w) for w in wins if w <= cut]
+    rest: list[tuple[str, int | None]] = [("time", w) for w in wins if w > cut]
+    if pb.approach != "time":
+        rest.append(("time", None))
+    rest.append((pb.approach, None))
+    if not screen:
+        screen, rest = rest[:1], rest[1:]
+    return {"screen": screen, "rest": rest, "all": screen + rest}[part]
+
+
+def design_score_of(pb: Any, setup: Mapping[str, Any]) -> tuple[str, int | None]:
+    """What ranks the design points: the coarse response when the record has one, else the first window."""
+    choice = setup.get("design_score", "auto")
+    segs = response_segments(pb)
+    if choice in ("auto", "response") and segs:
+        return "response", segs[0]
+    if choice == "frequency" and pb.has_frequency:
+        return "frequency", None
+    wins = pb.windows()
+    return "time", (wins[0] if wins else None)
+
+
 def design_task(setup: dict[str, Any], points: list[list[float]]) -> dict[str, Any]:
     """Costs of design points (unit cube) with the worker's FMU instance."""
     pb = problem(setup)
-    if setup.get("design_score") == "frequency" and pb.has_frequency:
-        costs = [pb.residual(np.asarray(x, float), "frequency")[1] for x in points]
-        return {"costs": costs, "scored_on": "frequency", **pb.stats()}
-    wins = pb.windows()
-    w = wins[0] if wins else None
-    costs = [pb.residual(np.asarray(x, float), "time", w)[1] for x in points]
-    return {"costs": costs, "scored_on": f"time, first {w or pb.n} samples", **pb.stats()}
+    which, window = design_score_of(pb, setup)
+    costs = [pb.residual(np.asarray(x, float), which, window)[1] for x in points]
+    label = {"response": f"response, segments of {window} samples", "frequency": "frequency"}.get(
+        which, f"time, first {window or pb.n} samples")
+    return {"costs": costs, "scored_on": label, **pb.stats()}
 
 
 class _Spent(Exception):
     pass
 
 
-def restart_task(setup: dict[str, Any], x0: list[float], simulations: int) -> dict[str, Any]:
-    """One least-squares restart from ``x0`` with at most ``simulations`` FMU runs."""
+class _Stalled(Exception):
+    pass
+
+
+def stage_label(which: str, window: int | None) -> str:
+    if which == "response":
+        return f"response ({window}-sample segments)"
+    return f"{which}{f' (first {window} samples)' if window else ''}"
+
+
+def restart_task(setup: dict[str, Any], x0: list[float], simulations: int, part: str = "all") -> dict[str, Any]:
+    """One restart from ``x0``: a trust-region least squares per stage (:func:`stages_of` ``part``).
+
+    Each stage stops when :func:`scipy.optimize.least_squares` converges, when its best cost
+    fell by less than :data:`STALL_FRACTION` over its last ``STALL_SPAN (n + 1)`` FMU runs
+    (progress), or after ``simulations`` runs (a cap).
+    """
     from scipy.optimize import least_squares
 
     pb = problem(setup)
     x = np.clip(np.asarray(x0, float), 0.0, 1.0)
-    stages: list[tuple[str, int | None]] = [("time", w) for w in pb.windows()] + [(pb.approach, None)]
-    if pb.approach != "time":
-        stages.insert(-1, ("time", None))
-    messages = []
+    nv = x.size
+    span = STALL_SPAN * (nv + 1)
+    stages = stages_of(pb, part)
+    messages, per_stage = [], []
     best: dict[str, Any] = {}
-    start = 0
-    for k, (which, window) in enumerate(stages):
-        # every stage may use ``simulations`` runs (a window of w samples costs w / n of a whole run)
+    for which, window in stages:
         start = pb.simulations
         limit = start + simulations
         best = {"x": [float(v) for v in x], "cost": math.inf}
+        trace: list[float] = []
 
         def fun(z: np.ndarray, which: str = which, limit: int = limit, window: int | None = window) -> np.ndarray:
             if pb.simulations >= limit:
                 raise _Spent
+            if len(trace) > span and trace[-1] > trace[-1 - span] * (1.0 - STALL_FRACTION):
+                raise _Stalled
             r, c = pb.residual(z, which, window)
             if c < best["cost"]:
                 best["x"], best["cost"] = [float(v) for v in z], float(c)
+            trace.append(best["cost"])
             return r
 
+        label = stage_label(which, window)
         try:
             sol = least_squares(fun, x, jac="2-point", bounds=(0.0, 1.0), method="trf",
                                 diff_step=float(setup["diff_step"]), x_scale="jac", ftol=1e-12, xtol=1e-10,
                                 gtol=1e-12, max_nfev=10 * simulations)
-            messages.append(f"{which}{f' ({window} samples)' if window else ''}: {sol.message}")
+            messages.append(f"{label}: {sol.message}")
         except _Spent:
-            messages.append(f"{which}{f' ({window} samples)' if window else ''}: stopped at {limit} FMU runs in all")
+            messages.append(f"{label}: stopped at the cap of {simulations} FMU runs")
+        except _Stalled:
+            messages.append(f"{label}: stopped on progress (cost fell < {STALL_FRACTION:g} over {span} runs)")
         if not math.isfinite(best["cost"]):
             best["cost"] = float(pb.residual(np.asarray(best["x"]), which, window)[1])
         x = np.asarray(best["x"], float)
+        per_stage.append({"stage": label, "runs": pb.simulations - start, "cost": best["cost"]})
     return {"x": best["x"], "cost": best["cost"], "message": "; then ".join(messages), "stages": stages,
-            **pb.stats()}
+            "per_stage": per_stage, **pb.stats()}
 
 
 # ---------------------------------------------------------------------- the recipe
+def _hold_text(setup: Mapping[str, Any], pb: Any) -> str | None:
+    if not setup["input"]:
+        return None
+    if setup["input_hold"] == "zoh":
+        return "zoh (each sample held over its interval)"
+    return ("linear (input derivatives)" if pb.model.interpolates
+            else f"linear (midpoint of {setup['substeps']} substeps)")
+
+
 def _out_dir(cfg: Mapping[str, Any], setup: Mapping[str, Any]) -> Path:
     key = hashlib.sha256(json.dumps({"cfg": cfg, "setup": setup}, sort_keys=True, default=str).encode()).hexdigest()
     return Path(f"estimate-{Path(setup['fmu']).stem}-{key[:8]}")
@@ -269,9 +375,10 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
     names = list(pb.params.varying)
     n = len(names)
     budget = dict(cfg.get("budget", {}))
-    n_design = int(budget.get("design", 20 * n))  # scored on the first window: cheap
+    n_design = int(budget.get("design", 10 * n + 10))
     restarts = int(budget.get("restarts", 3))
-    per_restart = int(budget.get("simulations", 10 * (n + 1)))
+    per_restart = int(budget.get("simulations", 40 * (n + 1)))  # a cap per stage; stages stop on progress
+    candidates = int(budget.get("candidates", max(2 * restarts, n + 2)))
     if n_design < 1 or restarts < 1 or per_restart < n + 2:
         raise _bad(f"config key 'budget': need design >= 1, restarts >= 1, simulations >= {n + 2}")
     seed = int(cfg.get("seed", 1))
@@ -284,16 +391,33 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
                   label=f"design {k + 1}/{len(chunks)} ({c.size} runs)") for k, c in enumerate(chunks)]
     res = run_tasks(tasks, executor=executor, store=store, progress=progress, workers=workers)
     costs = np.concatenate([np.asarray(r["costs"], float) for r in res])
-    order = np.argsort(costs, kind="stable")[:restarts]
     sims = sum(int(r["simulations"]) for r in res)
     fails = sum(int(r["failures"]) for r in res)
-    rtasks = [Task(f"restart-{k + 1}", restart_task,
-                   {"setup": setup, "x0": design[i].tolist(), "simulations": per_restart},
-                   label=f"restart {k + 1}/{len(order)} from design point {i} (cost {costs[i]:.3g})")
-              for k, i in enumerate(order)]
+    # screen: the short windows from the best ``candidates`` design points (cheap runs)
+    cand = np.argsort(costs, kind="stable")[:max(candidates, restarts)]
+    stasks = [Task(f"screen-{k + 1}", restart_task,
+                   {"setup": setup, "x0": design[i].tolist(), "simulations": per_restart, "part": "screen"},
+                   label=f"screen {k + 1}/{len(cand)} from design point {i} (cost {costs[i]:.3g})")
+              for k, i in enumerate(cand)]
+    screened = run_tasks(stasks, executor=executor, store=store, progress=progress, workers=workers)
+    sims += sum(int(r["simulations"]) for r in screened)
+    fails += sum(int(r["failures"]) for r in screened)
+    ranked = sorted(range(len(screened)), key=lambda k: screened[k]["cost"])
+    c0 = float(screened[ranked[0]]["cost"])
+    keep = [k for k in ranked[:restarts] if k == ranked[0] or screened[k]["cost"] <= SCREEN_RATIO * c0]
+    rtasks = [Task(f"restart-{j + 1}", restart_task,
+                   {"setup": setup, "x0": screened[k]["x"], "simulations": per_restart, "part": "rest"},
+                   label=f"restart {j + 1}/{len(keep)} from screen {k + 1} (cost {screened[k]['cost']:.3g})")
+              for j, k in enumerate(keep)]
     ends = run_tasks(rtasks, executor=executor, store=store, progress=progress, workers=workers)
-    sims += sum(int(r["simulations"]) for r in ends)
-    fails += sum(int(r["failures"]) for r in ends)
+    for j, k in enumerate(keep):
+        e = ends[j] = dict(ends[j])
+        e["per_stage"] = list(screened[k].get("per_stage", [])) + list(e.get("per_stage", []))
+        e["message"] = f"{screened[k]['message']}; then {e['message']}"
+        e["simulations"] = int(e["simulations"]) + int(screened[k]["simulations"])
+        e["failures"] = int(e["failures"]) + int(screened[k]["failures"])
+    sims += sum(int(r["simulations"]) for r in ends) - sum(int(screened[k]["simulations"]) for k in keep)
+    fails += sum(int(r["failures"]) for r in ends) - sum(int(screened[k]["failures"]) for k in keep)
     best = min(range(len(ends)), key=lambda k: ends[k]["cost"])
     xb = np.asarray(ends[best]["x"], float)
     pb.reset_stats()
@@ -302,13 +426,12 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
     v = verdict(pb.residuals, pb.params, xb, pb.data(), end_points)
     sims += pb.simulations
     fails += pb.model.failures
-    samples = sum(int(r.get("samples", 0)) for r in list(res) + list(ends)) + pb.model.samples
+    samples = sum(int(r.get("samples", 0)) for r in list(res) + list(screened) + list(ends)) + pb.model.samples
     est = pb.values(xb)
     answer: dict[str, Any] = {
         "fmu": Path(setup["fmu"]).name, "approach": setup["approach"],
-        "input": setup["input"], "input_hold": ("linear (input derivatives)" if pb.model.interpolates
-                                                else f"linear (midpoint of {setup['substeps']} substeps)")
-        if setup["input"] else None,
+        "input": setup["input"], "input_hold": _hold_text(setup, pb), "input_hold_reason": setup["hold_reason"],
+        "values": dict(setup["values"]),
         "estimate": {k: est[k] for k in names}, "tied": {k: est[k] for k in setup["ties"]},
         "cost": float(ends[best]["cost"]), "fmu_simulations": sims, "failed_evaluations": fails,
         "fmu_record_equivalents": samples / pb.n,
@@ -316,9 +439,13 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
         "convergence_reason": v["convergence_reason"], "uncertainty": v["uncertainty"],
         "non_identifiable": v["non_identifiable"],
         "verdict": {k: v[k] for k in ("residual_rms", "noise_floor", "tolerance", "at_bound", "restarts", "condition")},
-        "design": {"points": n_design, "best_cost": float(costs.min()), "failed": int(np.sum(costs >= 1e3))},
+        "design": {"points": n_design, "best_cost": float(costs.min()), "failed": int(np.sum(costs >= 1e3)),
+                   "scored_on": res[0].get("scored_on"), "runs": int(sum(int(r["simulations"]) for r in res))},
+        "screen": {"candidates": len(screened), "kept": len(keep),
+                   "runs": int(sum(int(r["simulations"]) for r in screened)),
+                   "costs": [float(r["cost"]) for r in screened]},
         "restarts": [{"restart": k + 1, "cost": e["cost"], "simulations": e["simulations"],
-                      "failures": e["failures"], "message": e["message"],
+                      "failures": e["failures"], "message": e["message"], "runs_per_stage": e.get("per_stage"),
                       "estimate": {kk: pb.values(np.asarray(e["x"]))[kk] for kk in names}}
                      for k, e in enumerate(ends)],
         "out": str(store),
