@@ -4,42 +4,58 @@ Config (JSON)::
 
     {
       "fmu": "fmus/two-section/two_section_dut.fmu",   # FMI 2.0 or 3.0 Co-Simulation, any tool
-      "input": "i_in",          # the FMU's current input (A); omit for an FMU with its own source
-      "output": "v_in",         # the FMU's voltage output compared with the record (V)
+      "input": "i_in",          # the FMU's input, a column of the record; omit for an FMU with its own source
+      "input_hold": "auto",     # "auto" (default: decided from the record), "zoh" or "linear"
+      "output": "v_in",         # the FMU output compared with the record
       "outputs": ["v_mid"],     # optional further compared outputs (columns of the record)
       "current": "i_in",        # FMU without input, approach "frequency": its current output
       "parameters": {"R1": {"min": 1, "max": 100}, "L1": {"min": 1, "max": 100}},
+      "values": {"R_src": 50},  # optional: FMU parameters set for every run, not estimated
       "ties": {"R2": "R1"},     # optional: FMU parameters set equal to (expressions of) others
       "target": {"kind": "waveforms-csv", "path": "record.csv",   # columns time_s, input, output(s)
                  "values": {"R1": 10}},                          # optional true values (errors_percent)
       "approach": "time",       # "time", "emd", "iemd" or "frequency" (Welch H1 of the waveforms)
       "frequency": {"fmin": 20, "fmax": 9000, "points": 200},
-      "budget": {"design": 16, "restarts": 3, "simulations": 60},  # LHS points, restarts, runs per restart
-      "substeps": 2,            # communication steps per sample for an input FMU (linear input)
+      "budget": {"design": 70, "candidates": 8, "restarts": 3, "simulations": 280},
+      "substeps": 2,            # communication steps per sample for a linear hold without input derivatives
       "diff_step": 1e-5,        # finite-difference step in the unit cube
       "seed": 1
     }
 
-Recipe (few evaluations, each a whole FMU run):
+The input's hold (:func:`estimation.holds.decide_hold`): an input with few
+distinct levels (a PRBS, a DAC staircase) changes only at sample instants and
+is held over each sample (zero-order hold); any other input varies linearly
+between samples. The answer reports the hold and the reason.
 
-1. a Latin-hypercube design of ``budget.design`` points (default ``20 n``,
+Recipe (few evaluations, each a whole FMU run or a window of one):
+
+1. a Latin-hypercube design of ``budget.design`` points (default ``10 n + 10``,
    :class:`scipy.stats.qmc.LatinHypercube`) in the unit cube (log scale for
-   positive bounds), scored on the first continuation window (a 256th of the
-   record: each point costs a 256th of a run), in parallel;
-2. from the ``budget.restarts`` best design points (scored on the time
-   residual of the first window), a trust-region least squares
+   positive bounds), ranked on the record's *responses*: the log-magnitude of
+   the Welch H1 responses from the input (or recorded current) to every
+   compared output over the whole record (:meth:`~estimation.fmu_problem.FmuProblem.response_target`,
+   Hann segments of an 8th of the record), a smooth function of the
+   parameters where the time residual of a long record is a needle;
+2. the *screen*: from the ``budget.candidates`` best design points (default
+   ``max(2 restarts, n + 2)``), a trust-region least squares
    (:func:`scipy.optimize.least_squares`, ``trf``, two-point finite-difference
-   Jacobian, bounds of the cube) per stage of a continuation: the time
-   residual over doubling windows of the record (the first ``first_window``
-   samples, default a 256th of the record, then twice that ...), then over the
-   whole record, then the approach's own residuals (:mod:`estimation.fmu_problem`);
-   at most ``budget.simulations`` runs per stage (default ``10 (n + 1)``), the
-   restarts in parallel;
-3. the verdict of :mod:`estimation.verdict` on the best end point
-   (uncertainty from the Fisher information, non-identifiable parameters,
-   agreement of the restarts).
+   Jacobian, bounds of the cube) on the time residual over doubling first
+   windows of the record up to a 32nd of it (cheap runs); a start in a wrong
+   basin ends the screen well above the noise;
+3. the ``budget.restarts`` best screened candidates (those within 1.5 times
+   the best screen cost) continue over the longer windows, the whole record and
+   the approach's own residuals (:mod:`estimation.fmu_problem`);
+4. the verdict of :mod:`estimation.verdict` on the best end point
+   (uncertainty from the Fisher information, non-identifiable parameters with
+   the reason, agreement of the restarts).
 
-Every design chunk and restart is a task of :func:`estimation.executor.run_tasks`
+Budgets: every stage stops when the least squares converges, when its best
+cost fell by less than a 1e-4 fraction over its last ``4 (n + 1)`` runs
+(progress), or at the cap of ``budget.simulations`` runs (default
+``40 (n + 1)``). The answer reports the runs of every stage of every restart
+(``restarts[].runs_per_stage``), of the design and of the screen.
+
+Every design chunk, screened candidate and restart is a task of :func:`estimation.executor.run_tasks`
 (local processes, ``serial``, or a Dask scheduler address), stored atomically
 as it finishes under ``--out DIR``; running the same command again skips the
 stored ones. Each worker process instantiates the FMU once and resets it per
@@ -437,7 +453,7 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
         "fmu_record_equivalents": samples / pb.n,
         "wall_s": time.perf_counter() - t0, "converged": v["converged"],
         "convergence_reason": v["convergence_reason"], "uncertainty": v["uncertainty"],
-        "non_identifiable": v["non_identifiable"],
+        "non_identifiable": v["non_identifiable"], "non_identifiable_reasons": v["non_identifiable_reasons"],
         "verdict": {k: v[k] for k in ("residual_rms", "noise_floor", "tolerance", "at_bound", "restarts", "condition")},
         "design": {"points": n_design, "best_cost": float(costs.min()), "failed": int(np.sum(costs >= 1e3)),
                    "scored_on": res[0].get("scored_on"), "runs": int(sum(int(r["simulations"]) for r in res))},

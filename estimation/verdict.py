@@ -196,7 +196,8 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
     -------
     dict
         ``converged``, ``convergence_reason``, ``uncertainty`` {name:
-        relative 1-sigma}, ``non_identifiable``, ``residual_rms``,
+        relative 1-sigma}, ``non_identifiable``, ``non_identifiable_reasons`` {name: why},
+        ``residual_rms``,
         ``noise_floor``, ``tolerance``, ``at_bound``, ``restarts`` and
         ``condition``.
     """
@@ -249,6 +250,17 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
             reasons.append("not at a minimum: a Gauss-Newton step would move "
                            + ", ".join(f"{k} by {100 * d:+.3g} %" for k, d in zip(names, step) if k in moving))
     non_ident = [k for k in names if not unc[k] <= UNCERTAIN or k in differing]
+    why: dict[str, str] = {}
+    for k in non_ident:
+        parts = []
+        if k in fi["null"]:
+            parts.append("in a null direction of the residuals' Jacobian (its effect is matched by others)")
+        elif not unc[k] <= UNCERTAIN:
+            parts.append(f"Fisher-information 1-sigma {100 * unc[k]:.3g} % (above {100 * UNCERTAIN:g} %)")
+        if k in differing:
+            parts.append("restarts that fit equally well differ on it by more than "
+                         f"{100 * AGREE:g} %")
+        why[k] = "; ".join(parts)
     if non_ident:
         reasons.append(f"not identifiable from these data: {', '.join(non_ident)}")
     converged = not reasons
@@ -259,6 +271,7 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
                                if converged else "; ".join(reasons)),
         "uncertainty": unc,
         "non_identifiable": non_ident,
+        "non_identifiable_reasons": why,
         "residual_rms": rms,
         "noise_floor": noise,
         "tolerance": tol,
