@@ -51,8 +51,8 @@ Recipe (few evaluations, each a whole FMU run or a window of one):
 
 Budgets: every stage stops when the least squares converges, when its best
 cost fell by less than a 1e-4 fraction over its last ``4 (n + 1)`` runs
-(progress), or at the cap of ``budget.simulations`` runs (default
-``40 (n + 1)``). The answer reports the runs of every stage of every restart
+(progress; not the last stage, which runs to the minimum), or at the cap of
+``budget.simulations`` runs (default ``40 (n + 1)``). The answer reports the runs of every stage of every restart
 (``restarts[].runs_per_stage``), of the design and of the screen.
 
 Every design chunk, screened candidate and restart is a task of :func:`estimation.executor.run_tasks`
@@ -79,6 +79,7 @@ import numpy as np
 from .fmu_model import FmuSetupError, fmu_variables
 from .fmu_problem import APPROACHES, problem, read_record
 from .holds import HOLDS, decide_hold
+from .local_search import staged_least_squares
 
 __all__ = ["make_setup", "run_fmu_estimate", "design_task", "restart_task"]
 
@@ -209,9 +210,6 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
 # ---------------------------------------------------------------------- tasks (run in worker processes)
 #: Welch segments of the response stages, as fractions of the record: coarse (smooth) first, then fine.
 RESPONSE_SEGMENTS = (8, 2)
-#: A stage stops when its best cost fell by less than this fraction over its last ``STALL_SPAN (n + 1)`` runs.
-STALL_FRACTION = 1e-4
-STALL_SPAN = 4
 #: Screened candidates go on only when their screen cost is within this factor of the best one's.
 SCREEN_RATIO = 1.5
 
@@ -271,14 +269,6 @@ def design_task(setup: dict[str, Any], points: list[list[float]]) -> dict[str, A
     return {"costs": costs, "scored_on": label, **pb.stats()}
 
 
-class _Spent(Exception):
-    pass
-
-
-class _Stalled(Exception):
-    pass
-
-
 def stage_label(which: str, window: int | None) -> str:
     if which == "response":
         return f"response ({window}-sample segments)"
@@ -288,52 +278,15 @@ def stage_label(which: str, window: int | None) -> str:
 def restart_task(setup: dict[str, Any], x0: list[float], simulations: int, part: str = "all") -> dict[str, Any]:
     """One restart from ``x0``: a trust-region least squares per stage (:func:`stages_of` ``part``).
 
-    Each stage stops when :func:`scipy.optimize.least_squares` converges, when its best cost
-    fell by less than :data:`STALL_FRACTION` over its last ``STALL_SPAN (n + 1)`` FMU runs
-    (progress), or after ``simulations`` runs (a cap).
+    :func:`estimation.local_search.staged_least_squares`: each stage stops when the least squares
+    converges, when its best cost stops falling (progress), or after ``simulations`` FMU runs (a cap).
     """
-    from scipy.optimize import least_squares
-
     pb = problem(setup)
-    x = np.clip(np.asarray(x0, float), 0.0, 1.0)
-    nv = x.size
-    span = STALL_SPAN * (nv + 1)
     stages = stages_of(pb, part)
-    messages, per_stage = [], []
-    best: dict[str, Any] = {}
-    for which, window in stages:
-        start = pb.simulations
-        limit = start + simulations
-        best = {"x": [float(v) for v in x], "cost": math.inf}
-        trace: list[float] = []
-
-        def fun(z: np.ndarray, which: str = which, limit: int = limit, window: int | None = window) -> np.ndarray:
-            if pb.simulations >= limit:
-                raise _Spent
-            if len(trace) > span and trace[-1] > trace[-1 - span] * (1.0 - STALL_FRACTION):
-                raise _Stalled
-            r, c = pb.residual(z, which, window)
-            if c < best["cost"]:
-                best["x"], best["cost"] = [float(v) for v in z], float(c)
-            trace.append(best["cost"])
-            return r
-
-        label = stage_label(which, window)
-        try:
-            sol = least_squares(fun, x, jac="2-point", bounds=(0.0, 1.0), method="trf",
-                                diff_step=float(setup["diff_step"]), x_scale="jac", ftol=1e-12, xtol=1e-10,
-                                gtol=1e-12, max_nfev=10 * simulations)
-            messages.append(f"{label}: {sol.message}")
-        except _Spent:
-            messages.append(f"{label}: stopped at the cap of {simulations} FMU runs")
-        except _Stalled:
-            messages.append(f"{label}: stopped on progress (cost fell < {STALL_FRACTION:g} over {span} runs)")
-        if not math.isfinite(best["cost"]):
-            best["cost"] = float(pb.residual(np.asarray(best["x"]), which, window)[1])
-        x = np.asarray(best["x"], float)
-        per_stage.append({"stage": label, "runs": pb.simulations - start, "cost": best["cost"]})
-    return {"x": best["x"], "cost": best["cost"], "message": "; then ".join(messages), "stages": stages,
-            "per_stage": per_stage, **pb.stats()}
+    out = staged_least_squares(lambda z, st: pb.residual(z, st[0], st[1]), np.asarray(x0, float), stages,
+                               simulations, lambda: pb.simulations, lambda st: stage_label(*st),
+                               float(setup["diff_step"]), finish=part != "screen")
+    return {**out, "stages": stages, **pb.stats()}
 
 
 # ---------------------------------------------------------------------- the recipe
