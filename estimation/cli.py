@@ -328,6 +328,9 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
         if not answer["converged"]:
             print(f"warning: estimate not converged: {answer['convergence_reason']}", file=sys.stderr, flush=True)
         return answer
+    for key in ("values", "input_hold"):
+        if key in cfg:
+            raise EstimationInputError(f"config key {key!r} applies only to a config with 'fmu'")
     from pris_cosim import timedomain as td
     from pris_cosim.arrangement import SourceSettings
     from pris_cosim.measured import read_response_csv, read_waveform_csv
