@@ -24,6 +24,12 @@ fixed length, dimensionless; the reported cost is their RMS:
     half-record Hann segments) at the bins where the record's coherence is
     at least 0.99, in decades.
 
+``response`` (ranks the design points)
+    ``log10 |H / H_t|`` of the Welch H1 responses from the record's input (or
+    recorded current) to every compared output, Hann segments of ``window``
+    samples, at the bins up to ``0.45 fs`` where the input has power and the
+    record's coherence is at least 0.9 (:meth:`FmuProblem.response_target`).
+
 A failed run (:class:`estimation.fmu_model.FmuModel` returns None) gives the
 residual vector ``PENALTY`` everywhere: a cost far above any fit's.
 """
