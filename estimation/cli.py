@@ -54,7 +54,8 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
     A ``"netlist": FILE`` with ``"port": NODE`` replaces ``"model"`` (parameters: element or
     ``.param`` names). An ``"fmu": FILE`` config (FMI 2.0/3.0 Co-Simulation in the loop, keys
     ``input``, ``output``, ``outputs``, ``current``, ``parameters``, ``ties``, ``target``,
-    ``approach``, ``budget``, ``substeps``, ``diff_step``, ``first_window``, ``seed``) goes to
+    ``approach``, ``budget``, ``substeps``, ``diff_step``, ``first_window``, ``seed``, ``values``,
+    ``input_hold``) goes to
     :mod:`estimation.fmu_estimate`; ``--out DIR``, ``--scheduler``, ``--workers`` apply to it.
 
     Defaults (``estimation.estimate``): GA + L-BFGS-B sized to the number of
@@ -247,7 +248,7 @@ def load_config(path: str | Path) -> dict[str, Any]:
     known = {"model", "netlist", "port", "parameters", "ties", "target", "approach", "responses", "frequency", "source", "fs",
              "duration", "cost", "optimiser", "options", "budget", "seed", "configuration", "drive", "fmu", "input",
              "output", "outputs", "current", "substeps", "diff_step", "first_window", "design_score",
-             "window_growth"}
+             "window_growth", "values", "input_hold"}
     unknown = sorted(set(cfg) - known)
     if unknown:
         raise EstimationInputError(f"config key {unknown[0]!r} is not known (known: {', '.join(sorted(known))})")
@@ -327,6 +328,9 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
         if not answer["converged"]:
             print(f"warning: estimate not converged: {answer['convergence_reason']}", file=sys.stderr, flush=True)
         return answer
+    for key in ("values", "input_hold"):
+        if key in cfg:
+            raise EstimationInputError(f"config key {key!r} applies only to a config with 'fmu'")
     from pris_cosim import timedomain as td
     from pris_cosim.arrangement import SourceSettings
     from pris_cosim.measured import read_response_csv, read_waveform_csv

@@ -10,7 +10,7 @@ study, thesis Table 4.5; three-section study, Tables 4.9/4.10):
    (L-BFGS-B), sized to the number of parameters ``n``: population
    ``max(100, 40 n)`` (at most 300), 100 generations;
 2. a trust-region least-squares polish on the approach's own residuals
-   (Jacobian-scaled, :func:`estimation.studies.common.least_squares_polish`,
+   (Jacobian-scaled, :func:`estimation.local_search.least_squares_polish`,
    ``30 + 10 n`` evaluations of the residuals),
    which moves the weakly sensitive resistances that the summed cost hides;
 3. ``restarts`` independent seeds (3 up to 12 parameters, 2 above), and more
@@ -143,7 +143,7 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
     -------
     Outcome
     """
-    from .studies.common import least_squares_polish
+    from .local_search import least_squares_polish
 
     plan = dict(plan or default_plan(approach.n))
     first = proxy or approach

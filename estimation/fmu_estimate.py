@@ -4,42 +4,58 @@ Config (JSON)::
 
     {
       "fmu": "fmus/two-section/two_section_dut.fmu",   # FMI 2.0 or 3.0 Co-Simulation, any tool
-      "input": "i_in",          # the FMU's current input (A); omit for an FMU with its own source
-      "output": "v_in",         # the FMU's voltage output compared with the record (V)
+      "input": "i_in",          # the FMU's input, a column of the record; omit for an FMU with its own source
+      "input_hold": "auto",     # "auto" (default: decided from the record), "zoh" or "linear"
+      "output": "v_in",         # the FMU output compared with the record
       "outputs": ["v_mid"],     # optional further compared outputs (columns of the record)
       "current": "i_in",        # FMU without input, approach "frequency": its current output
       "parameters": {"R1": {"min": 1, "max": 100}, "L1": {"min": 1, "max": 100}},
+      "values": {"R_src": 50},  # optional: FMU parameters set for every run, not estimated
       "ties": {"R2": "R1"},     # optional: FMU parameters set equal to (expressions of) others
       "target": {"kind": "waveforms-csv", "path": "record.csv",   # columns time_s, input, output(s)
                  "values": {"R1": 10}},                          # optional true values (errors_percent)
       "approach": "time",       # "time", "emd", "iemd" or "frequency" (Welch H1 of the waveforms)
       "frequency": {"fmin": 20, "fmax": 9000, "points": 200},
-      "budget": {"design": 16, "restarts": 3, "simulations": 60},  # LHS points, restarts, runs per restart
-      "substeps": 2,            # communication steps per sample for an input FMU (linear input)
+      "budget": {"design": 70, "candidates": 8, "restarts": 3, "simulations": 280},
+      "substeps": 2,            # communication steps per sample for a linear hold without input derivatives
       "diff_step": 1e-5,        # finite-difference step in the unit cube
       "seed": 1
     }
 
-Recipe (few evaluations, each a whole FMU run):
+The input's hold (:func:`estimation.holds.decide_hold`): an input with few
+distinct levels (a PRBS, a DAC staircase) changes only at sample instants and
+is held over each sample (zero-order hold); any other input varies linearly
+between samples. The answer reports the hold and the reason.
 
-1. a Latin-hypercube design of ``budget.design`` points (default ``20 n``,
+Recipe (few evaluations, each a whole FMU run or a window of one):
+
+1. a Latin-hypercube design of ``budget.design`` points (default ``10 n + 10``,
    :class:`scipy.stats.qmc.LatinHypercube`) in the unit cube (log scale for
-   positive bounds), scored on the first continuation window (a 256th of the
-   record: each point costs a 256th of a run), in parallel;
-2. from the ``budget.restarts`` best design points (scored on the time
-   residual of the first window), a trust-region least squares
+   positive bounds), ranked on the record's *responses*: the log-magnitude of
+   the Welch H1 responses from the input (or recorded current) to every
+   compared output over the whole record (:meth:`~estimation.fmu_problem.FmuProblem.response_target`,
+   Hann segments of an 8th of the record), a smooth function of the
+   parameters where the time residual of a long record is a needle;
+2. the *screen*: from the ``budget.candidates`` best design points (default
+   ``max(2 restarts, n + 2)``), a trust-region least squares
    (:func:`scipy.optimize.least_squares`, ``trf``, two-point finite-difference
-   Jacobian, bounds of the cube) per stage of a continuation: the time
-   residual over doubling windows of the record (the first ``first_window``
-   samples, default a 256th of the record, then twice that ...), then over the
-   whole record, then the approach's own residuals (:mod:`estimation.fmu_problem`);
-   at most ``budget.simulations`` runs per stage (default ``10 (n + 1)``), the
-   restarts in parallel;
-3. the verdict of :mod:`estimation.verdict` on the best end point
-   (uncertainty from the Fisher information, non-identifiable parameters,
-   agreement of the restarts).
+   Jacobian, bounds of the cube) on the time residual over doubling first
+   windows of the record up to a 32nd of it (cheap runs); a start in a wrong
+   basin ends the screen well above the noise;
+3. the ``budget.restarts`` best screened candidates (those within 1.5 times
+   the best screen cost) continue over the longer windows, the whole record and
+   the approach's own residuals (:mod:`estimation.fmu_problem`);
+4. the verdict of :mod:`estimation.verdict` on the best end point
+   (uncertainty from the Fisher information, non-identifiable parameters with
+   the reason, agreement of the restarts).
 
-Every design chunk and restart is a task of :func:`estimation.executor.run_tasks`
+Budgets: every stage stops when the least squares converges, when its best
+cost fell by less than a 1e-4 fraction over its last ``4 (n + 1)`` runs
+(progress), or at the cap of ``budget.simulations`` runs (default
+``40 (n + 1)``). The answer reports the runs of every stage of every restart
+(``restarts[].runs_per_stage``), of the design and of the screen.
+
+Every design chunk, screened candidate and restart is a task of :func:`estimation.executor.run_tasks`
 (local processes, ``serial``, or a Dask scheduler address), stored atomically
 as it finishes under ``--out DIR``; running the same command again skips the
 stored ones. Each worker process instantiates the FMU once and resets it per
@@ -61,12 +77,15 @@ from typing import Any
 import numpy as np
 
 from .fmu_model import FmuSetupError, fmu_variables
-from .fmu_problem import APPROACHES, problem
+from .fmu_problem import APPROACHES, problem, read_record
+from .holds import HOLDS, decide_hold
+from .local_search import staged_least_squares
 
 __all__ = ["make_setup", "run_fmu_estimate", "design_task", "restart_task"]
 
 KNOWN = {"fmu", "input", "output", "outputs", "current", "parameters", "ties", "target", "approach", "frequency",
-         "budget", "substeps", "diff_step", "seed", "first_window", "design_score", "window_growth"}
+         "budget", "substeps", "diff_step", "seed", "first_window", "design_score", "window_growth", "values",
+         "input_hold"}
 
 
 def _bad(text: str) -> FmuSetupError:
@@ -90,8 +109,9 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
         if key in cfg and (not isinstance(cfg[key], kind) or isinstance(cfg[key], bool)):
             raise _bad(f"config key {key!r} has the wrong type ({type(cfg[key]).__name__})")
     for key, value in dict(cfg.get("budget", {})).items():
-        if key not in ("design", "restarts", "simulations") or not isinstance(value, int) or value < 1:
-            raise _bad(f"config key 'budget': {key!r} must be one of design, restarts, simulations, a positive integer")
+        if key not in ("design", "restarts", "simulations", "candidates") or not isinstance(value, int) or value < 1:
+            raise _bad(f"config key 'budget': {key!r} must be one of design, candidates, restarts, simulations, "
+                       "a positive integer")
     if "diff_step" in cfg and not 0 < float(cfg["diff_step"]) < 0.5:
         raise _bad("config key 'diff_step' must lie in (0, 0.5)")
     if "substeps" in cfg and cfg["substeps"] < 1:
@@ -99,8 +119,8 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
     growth = cfg.get("window_growth", 2.0)
     if not isinstance(growth, (int, float)) or isinstance(growth, bool) or not 1.05 <= growth <= 16:
         raise _bad("config key 'window_growth' must be a number from 1.05 to 16")
-    if cfg.get("design_score", "window") not in ("window", "frequency"):
-        raise _bad("config key 'design_score' must be 'window' or 'frequency'")
+    if cfg.get("design_score", "auto") not in ("auto", "response", "window", "frequency"):
+        raise _bad("config key 'design_score' must be 'auto', 'response', 'window' or 'frequency'")
     if "first_window" in cfg and cfg["first_window"] < 0:
         raise _bad("config key 'first_window' must be 0 (automatic) or a number of samples")
 
@@ -150,6 +170,20 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
         if scale not in ("log", "linear") or (scale == "log" and lo <= 0):
             raise _bad(f"parameter {name!r}: scale must be 'linear', or 'log' with min > 0")
         params[name] = [lo, hi, scale]
+    fixed = cfg.get("values", {})
+    if not isinstance(fixed, dict):
+        raise _bad("config key 'values' must map FMU parameters to numbers")
+    for name, value in fixed.items():
+        v = variables.get(name)
+        if v is None or v.causality != "parameter" or v.type not in ("Real", "Float64"):
+            raise _bad(f"config key 'values': {name!r} is not a real parameter of {Path(fmu).name}")
+        if name in params or name in ties:
+            raise _bad(f"config key 'values': {name!r} is also in {'parameters' if name in params else 'ties'}")
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(float(value)):
+            raise _bad(f"config key 'values': {name!r} must be a finite number (got {value!r})")
+    hold = cfg.get("input_hold", "auto")
+    if hold not in HOLDS:
+        raise _bad(f"config key 'input_hold' must be one of {', '.join(HOLDS)} (got {hold!r})")
     tgt = cfg.get("target")
     if not isinstance(tgt, dict) or tgt.get("kind", "waveforms-csv") != "waveforms-csv":
         raise _bad("config key 'target' must be {\"kind\": \"waveforms-csv\", \"path\": FILE} with an FMU")
@@ -158,72 +192,113 @@ def make_setup(cfg: Mapping[str, Any], base: str | Path = ".") -> dict[str, Any]
              "parameters": params, "ties": dict(ties), "target": path_of(tgt.get("path"), "target.path"),
              "approach": approach, "frequency": dict(cfg.get("frequency", {})),
              "substeps": int(cfg.get("substeps", 2)), "diff_step": float(cfg.get("diff_step", 1e-5)),
-             "first_window": int(cfg.get("first_window", 0)), "design_score": cfg.get("design_score", "window"),
-             "window_growth": float(cfg.get("window_growth", 2.0))}
+             "first_window": int(cfg.get("first_window", 0)), "design_score": cfg.get("design_score", "auto"),
+             "window_growth": float(cfg.get("window_growth", 2.0)),
+             "values": {k: float(v) for k, v in fixed.items()}}
     if not Path(setup["target"]).is_file():
         raise _bad(f"target file not found: {tgt.get('path')}")
+    if inp is None:
+        setup["input_hold"], setup["hold_reason"] = None, "no input: the FMU makes its own drive"
+    elif hold == "auto":
+        setup["input_hold"], setup["hold_reason"] = decide_hold(read_record(setup["target"], [inp])[inp], inp)
+    else:
+        setup["input_hold"], setup["hold_reason"] = hold, "set in the config ('input_hold')"
     problem(setup)  # reads the record and instantiates the FMU here: every setup error now, in one line
     return setup
 
 
 # ---------------------------------------------------------------------- tasks (run in worker processes)
+#: Welch segments of the response stages, as fractions of the record: coarse (smooth) first, then fine.
+RESPONSE_SEGMENTS = (8, 2)
+#: Screened candidates go on only when their screen cost is within this factor of the best one's.
+SCREEN_RATIO = 1.5
+
+
+def response_segments(pb: Any) -> list[int]:
+    """Welch segment lengths (samples) of the response stages the record supports (may be empty)."""
+    out = []
+    for m in RESPONSE_SEGMENTS:
+        nper = pb.n // m
+        if nper >= 64 and pb.response_target(nper) is not None and nper not in out:
+            out.append(nper)
+    return out
+
+
+def stages_of(pb: Any, part: str = "all") -> list[tuple[str, int | None]]:
+    """The stages of a restart: ``(residual, window)`` pairs, in order.
+
+    1. ``("time", w)``: the time residual over doubling first windows of the
+       record; the windows up to a 32nd of the record are the *screen*
+       (``part="screen"``): cheap, run from many candidates, whose end costs
+       tell a start in the right basin (it fits the window to the noise) from
+       one in a wrong one;
+    2. the longer windows, the whole record's time residual, and the approach's
+       own residual over the whole record (``part="rest"``).
+    """
+    wins = pb.windows()
+    cut = max(wins[0] if wins else 0, pb.n // 32)
+    screen: list[tuple[str, int | None]] = [("time", w) for w in wins if w <= cut]
+    rest: list[tuple[str, int | None]] = [("time", w) for w in wins if w > cut]
+    if pb.approach != "time":
+        rest.append(("time", None))
+    rest.append((pb.approach, None))
+    if not screen:
+        screen, rest = rest[:1], rest[1:]
+    return {"screen": screen, "rest": rest, "all": screen + rest}[part]
+
+
+def design_score_of(pb: Any, setup: Mapping[str, Any]) -> tuple[str, int | None]:
+    """What ranks the design points: the coarse response when the record has one, else the first window."""
+    choice = setup.get("design_score", "auto")
+    segs = response_segments(pb)
+    if choice in ("auto", "response") and segs:
+        return "response", segs[0]
+    if choice == "frequency" and pb.has_frequency:
+        return "frequency", None
+    wins = pb.windows()
+    return "time", (wins[0] if wins else None)
+
+
 def design_task(setup: dict[str, Any], points: list[list[float]]) -> dict[str, Any]:
     """Costs of design points (unit cube) with the worker's FMU instance."""
     pb = problem(setup)
-    if setup.get("design_score") == "frequency" and pb.has_frequency:
-        costs = [pb.residual(np.asarray(x, float), "frequency")[1] for x in points]
-        return {"costs": costs, "scored_on": "frequency", **pb.stats()}
-    wins = pb.windows()
-    w = wins[0] if wins else None
-    costs = [pb.residual(np.asarray(x, float), "time", w)[1] for x in points]
-    return {"costs": costs, "scored_on": f"time, first {w or pb.n} samples", **pb.stats()}
+    which, window = design_score_of(pb, setup)
+    costs = [pb.residual(np.asarray(x, float), which, window)[1] for x in points]
+    label = {"response": f"response, segments of {window} samples", "frequency": "frequency"}.get(
+        which, f"time, first {window or pb.n} samples")
+    return {"costs": costs, "scored_on": label, **pb.stats()}
 
 
-class _Spent(Exception):
-    pass
+def stage_label(which: str, window: int | None) -> str:
+    if which == "response":
+        return f"response ({window}-sample segments)"
+    return f"{which}{f' (first {window} samples)' if window else ''}"
 
 
-def restart_task(setup: dict[str, Any], x0: list[float], simulations: int) -> dict[str, Any]:
-    """One least-squares restart from ``x0`` with at most ``simulations`` FMU runs."""
-    from scipy.optimize import least_squares
+def restart_task(setup: dict[str, Any], x0: list[float], simulations: int, part: str = "all") -> dict[str, Any]:
+    """One restart from ``x0``: a trust-region least squares per stage (:func:`stages_of` ``part``).
 
+    :func:`estimation.local_search.staged_least_squares`: each stage stops when the least squares
+    converges, when its best cost stops falling (progress), or after ``simulations`` FMU runs (a cap).
+    """
     pb = problem(setup)
-    x = np.clip(np.asarray(x0, float), 0.0, 1.0)
-    stages: list[tuple[str, int | None]] = [("time", w) for w in pb.windows()] + [(pb.approach, None)]
-    if pb.approach != "time":
-        stages.insert(-1, ("time", None))
-    messages = []
-    best: dict[str, Any] = {}
-    start = 0
-    for k, (which, window) in enumerate(stages):
-        # every stage may use ``simulations`` runs (a window of w samples costs w / n of a whole run)
-        start = pb.simulations
-        limit = start + simulations
-        best = {"x": [float(v) for v in x], "cost": math.inf}
-
-        def fun(z: np.ndarray, which: str = which, limit: int = limit, window: int | None = window) -> np.ndarray:
-            if pb.simulations >= limit:
-                raise _Spent
-            r, c = pb.residual(z, which, window)
-            if c < best["cost"]:
-                best["x"], best["cost"] = [float(v) for v in z], float(c)
-            return r
-
-        try:
-            sol = least_squares(fun, x, jac="2-point", bounds=(0.0, 1.0), method="trf",
-                                diff_step=float(setup["diff_step"]), x_scale="jac", ftol=1e-12, xtol=1e-10,
-                                gtol=1e-12, max_nfev=10 * simulations)
-            messages.append(f"{which}{f' ({window} samples)' if window else ''}: {sol.message}")
-        except _Spent:
-            messages.append(f"{which}{f' ({window} samples)' if window else ''}: stopped at {limit} FMU runs in all")
-        if not math.isfinite(best["cost"]):
-            best["cost"] = float(pb.residual(np.asarray(best["x"]), which, window)[1])
-        x = np.asarray(best["x"], float)
-    return {"x": best["x"], "cost": best["cost"], "message": "; then ".join(messages), "stages": stages,
-            **pb.stats()}
+    stages = stages_of(pb, part)
+    out = staged_least_squares(lambda z, st: pb.residual(z, st[0], st[1]), np.asarray(x0, float), stages,
+                               simulations, lambda: pb.simulations, lambda st: stage_label(*st),
+                               float(setup["diff_step"]), finish=False)
+    return {**out, "stages": stages, **pb.stats()}
 
 
 # ---------------------------------------------------------------------- the recipe
+def _hold_text(setup: Mapping[str, Any], pb: Any) -> str | None:
+    if not setup["input"]:
+        return None
+    if setup["input_hold"] == "zoh":
+        return "zoh (each sample held over its interval)"
+    return ("linear (input derivatives)" if pb.model.interpolates
+            else f"linear (midpoint of {setup['substeps']} substeps)")
+
+
 def _out_dir(cfg: Mapping[str, Any], setup: Mapping[str, Any]) -> Path:
     key = hashlib.sha256(json.dumps({"cfg": cfg, "setup": setup}, sort_keys=True, default=str).encode()).hexdigest()
     return Path(f"estimate-{Path(setup['fmu']).stem}-{key[:8]}")
@@ -269,9 +344,10 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
     names = list(pb.params.varying)
     n = len(names)
     budget = dict(cfg.get("budget", {}))
-    n_design = int(budget.get("design", 20 * n))  # scored on the first window: cheap
+    n_design = int(budget.get("design", 10 * n + 10))
     restarts = int(budget.get("restarts", 3))
-    per_restart = int(budget.get("simulations", 10 * (n + 1)))
+    per_restart = int(budget.get("simulations", 40 * (n + 1)))  # a cap per stage; stages stop on progress
+    candidates = int(budget.get("candidates", max(2 * restarts, n + 2)))
     if n_design < 1 or restarts < 1 or per_restart < n + 2:
         raise _bad(f"config key 'budget': need design >= 1, restarts >= 1, simulations >= {n + 2}")
     seed = int(cfg.get("seed", 1))
@@ -284,41 +360,63 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
                   label=f"design {k + 1}/{len(chunks)} ({c.size} runs)") for k, c in enumerate(chunks)]
     res = run_tasks(tasks, executor=executor, store=store, progress=progress, workers=workers)
     costs = np.concatenate([np.asarray(r["costs"], float) for r in res])
-    order = np.argsort(costs, kind="stable")[:restarts]
     sims = sum(int(r["simulations"]) for r in res)
     fails = sum(int(r["failures"]) for r in res)
-    rtasks = [Task(f"restart-{k + 1}", restart_task,
-                   {"setup": setup, "x0": design[i].tolist(), "simulations": per_restart},
-                   label=f"restart {k + 1}/{len(order)} from design point {i} (cost {costs[i]:.3g})")
-              for k, i in enumerate(order)]
+    # screen: the short windows from the best ``candidates`` design points (cheap runs)
+    cand = np.argsort(costs, kind="stable")[:max(candidates, restarts)]
+    stasks = [Task(f"screen-{k + 1}", restart_task,
+                   {"setup": setup, "x0": design[i].tolist(), "simulations": per_restart, "part": "screen"},
+                   label=f"screen {k + 1}/{len(cand)} from design point {i} (cost {costs[i]:.3g})")
+              for k, i in enumerate(cand)]
+    screened = run_tasks(stasks, executor=executor, store=store, progress=progress, workers=workers)
+    sims += sum(int(r["simulations"]) for r in screened)
+    fails += sum(int(r["failures"]) for r in screened)
+    ranked = sorted(range(len(screened)), key=lambda k: screened[k]["cost"])
+    c0 = float(screened[ranked[0]]["cost"])
+    keep = [k for k in ranked[:restarts] if k == ranked[0] or screened[k]["cost"] <= SCREEN_RATIO * c0]
+    rtasks = [Task(f"restart-{j + 1}", restart_task,
+                   {"setup": setup, "x0": screened[k]["x"], "simulations": per_restart, "part": "rest"},
+                   label=f"restart {j + 1}/{len(keep)} from screen {k + 1} (cost {screened[k]['cost']:.3g})")
+              for j, k in enumerate(keep)]
     ends = run_tasks(rtasks, executor=executor, store=store, progress=progress, workers=workers)
-    sims += sum(int(r["simulations"]) for r in ends)
-    fails += sum(int(r["failures"]) for r in ends)
+    for j, k in enumerate(keep):
+        e = ends[j] = dict(ends[j])
+        e["per_stage"] = list(screened[k].get("per_stage", [])) + list(e.get("per_stage", []))
+        e["message"] = f"{screened[k]['message']}; then {e['message']}"
+        e["simulations"] = int(e["simulations"]) + int(screened[k]["simulations"])
+        e["failures"] = int(e["failures"]) + int(screened[k]["failures"])
+    sims += sum(int(r["simulations"]) for r in ends) - sum(int(screened[k]["simulations"]) for k in keep)
+    fails += sum(int(r["failures"]) for r in ends) - sum(int(screened[k]["failures"]) for k in keep)
     best = min(range(len(ends)), key=lambda k: ends[k]["cost"])
     xb = np.asarray(ends[best]["x"], float)
     pb.reset_stats()
     rms = lambda x: float(np.sqrt(np.mean(pb.residual(np.asarray(x, float))[0] ** 2)))  # noqa: E731
     end_points = [(np.asarray(e["x"], float), rms(e["x"])) for e in ends]
-    v = verdict(pb.residuals, pb.params, xb, pb.data(), end_points)
+    # a long record's time residual is a needle at the scale of the noise's 1-sigma: a Gauss-Newton step
+    # within it is no evidence of a better minimum
+    v = verdict(pb.residuals, pb.params, xb, pb.data(), end_points, step_within_sigma=True)
     sims += pb.simulations
     fails += pb.model.failures
-    samples = sum(int(r.get("samples", 0)) for r in list(res) + list(ends)) + pb.model.samples
+    samples = sum(int(r.get("samples", 0)) for r in list(res) + list(screened) + list(ends)) + pb.model.samples
     est = pb.values(xb)
     answer: dict[str, Any] = {
         "fmu": Path(setup["fmu"]).name, "approach": setup["approach"],
-        "input": setup["input"], "input_hold": ("linear (input derivatives)" if pb.model.interpolates
-                                                else f"linear (midpoint of {setup['substeps']} substeps)")
-        if setup["input"] else None,
+        "input": setup["input"], "input_hold": _hold_text(setup, pb), "input_hold_reason": setup["hold_reason"],
+        "values": dict(setup["values"]),
         "estimate": {k: est[k] for k in names}, "tied": {k: est[k] for k in setup["ties"]},
         "cost": float(ends[best]["cost"]), "fmu_simulations": sims, "failed_evaluations": fails,
         "fmu_record_equivalents": samples / pb.n,
         "wall_s": time.perf_counter() - t0, "converged": v["converged"],
         "convergence_reason": v["convergence_reason"], "uncertainty": v["uncertainty"],
-        "non_identifiable": v["non_identifiable"],
+        "non_identifiable": v["non_identifiable"], "non_identifiable_reasons": v["non_identifiable_reasons"],
         "verdict": {k: v[k] for k in ("residual_rms", "noise_floor", "tolerance", "at_bound", "restarts", "condition")},
-        "design": {"points": n_design, "best_cost": float(costs.min()), "failed": int(np.sum(costs >= 1e3))},
+        "design": {"points": n_design, "best_cost": float(costs.min()), "failed": int(np.sum(costs >= 1e3)),
+                   "scored_on": res[0].get("scored_on"), "runs": int(sum(int(r["simulations"]) for r in res))},
+        "screen": {"candidates": len(screened), "kept": len(keep),
+                   "runs": int(sum(int(r["simulations"]) for r in screened)),
+                   "costs": [float(r["cost"]) for r in screened]},
         "restarts": [{"restart": k + 1, "cost": e["cost"], "simulations": e["simulations"],
-                      "failures": e["failures"], "message": e["message"],
+                      "failures": e["failures"], "message": e["message"], "runs_per_stage": e.get("per_stage"),
                       "estimate": {kk: pb.values(np.asarray(e["x"]))[kk] for kk in names}}
                      for k, e in enumerate(ends)],
         "out": str(store),

@@ -11,8 +11,15 @@ runs.
 
 Inputs
 ------
-A DUT FMU takes the recorded current as an input. The true current is
-continuous, so it is replayed varying linearly between samples:
+An input FMU takes a recorded column as its input, replayed under one of two holds:
+
+``"zoh"`` (zero-order hold)
+    the sample ``u[k]`` is held over the whole interval ``[t_k, t_k + h)``, one
+    communication step per sample: exact for an input that a DAC or a digital
+    source drives (a PRBS of levels that change only at sample instants).
+``"linear"``
+    a continuous input (e.g. a measured current that flows through the
+    source's series inductance) varies linearly between samples:
 
 - an FMU that declares ``canInterpolateInputs`` gets the slope of every
   sample interval as its first input derivative (exact first-order hold);
@@ -84,7 +91,10 @@ class FmuModel:
     input : str, optional
         The FMU's current input (causality ``input``); None for an FMU with its own source.
     substeps : int
-        Communication steps per sample interval for an input FMU that cannot interpolate inputs.
+        Communication steps per sample interval for an input FMU that cannot interpolate inputs
+        (linear hold).
+    hold : {"linear", "zoh"}
+        How the input varies between samples (see the module docstring).
     limit : float
         Outputs beyond this magnitude count as a diverged run.
 
@@ -101,7 +111,7 @@ class FmuModel:
     """
 
     def __init__(self, path: str | Path, parameters: Sequence[str], outputs: Sequence[str],
-                 input: str | None = None, substeps: int = 4, limit: float = 1e12):
+                 input: str | None = None, substeps: int = 4, limit: float = 1e12, hold: str = "linear"):
         from fmpy import extract
 
         self.path = Path(path)
@@ -120,10 +130,12 @@ class FmuModel:
             v = self.variables.get(input)
             if v is None or v.causality != "input":
                 raise FmuSetupError(f"{self.path.name}: {input!r} is not an input of the FMU")
+        if hold not in ("linear", "zoh"):
+            raise FmuSetupError(f"input hold must be 'linear' or 'zoh' (got {hold!r})")
         if int(substeps) < 1:
             raise FmuSetupError(f"substeps must be at least 1 (got {substeps})")
         self.parameters, self.outputs, self.input = list(parameters), list(outputs), input
-        self.substeps, self.limit = int(substeps), float(limit)
+        self.substeps, self.limit, self.hold = int(substeps), float(limit), hold
         self.interpolates = bool(getattr(self.md.coSimulation, "canInterpolateInputs", False)) and not self.fmi3
         self._vr_par = [self.variables[n].valueReference for n in self.parameters]
         self._vr_out = [self.variables[n].valueReference for n in self.outputs]
@@ -270,7 +282,7 @@ class FmuModel:
                 raise RuntimeError(f"setting {self.input} failed")
 
         deriv = None
-        if u is not None and self.interpolates:
+        if u is not None and self.interpolates and self.hold == "linear":
             deriv = f["fmi2SetRealInputDerivatives"]
             order = (ctypes.c_int32 * 1)(1)
             dbuf = (ctypes.c_double * 1)()
@@ -284,7 +296,7 @@ class FmuModel:
             out[k] = buf[:]
             if k == n - 1:
                 break
-            if u is None:
+            if u is None or self.hold == "zoh":
                 if step(t, h) > 1:
                     raise RuntimeError(f"doStep at t = {t:.6g} s failed")
             elif deriv is not None:

@@ -24,6 +24,12 @@ fixed length, dimensionless; the reported cost is their RMS:
     half-record Hann segments) at the bins where the record's coherence is
     at least 0.99, in decades.
 
+``response`` (ranks the design points)
+    ``log10 |H / H_t|`` of the Welch H1 responses from the record's input (or
+    recorded current) to every compared output, Hann segments of ``window``
+    samples, at the bins up to ``0.45 fs`` where the input has power and the
+    record's coherence is at least 0.9 (:meth:`FmuProblem.response_target`).
+
 A failed run (:class:`estimation.fmu_model.FmuModel` returns None) gives the
 residual vector ``PENALTY`` everywhere: a cost far above any fit's.
 """
@@ -138,7 +144,10 @@ class FmuProblem:
 
         fmu_names = fmu_variables(setup["fmu"])[1]
         names = [k for k in self.params.names if k in fmu_names]  # helpers (e.g. couplings) only feed ties
+        self.fixed = {k: float(v) for k, v in dict(setup.get("values") or {}).items()}
+        names += [k for k in self.fixed if k not in names]
         self.model = FmuModel(setup["fmu"], names, fmu_out, input=self.input, substeps=int(setup.get("substeps", 2)),
+                              hold=setup.get("input_hold") or "linear",
                               limit=1e6 * max(float(np.max(np.abs(v))) for v in self.targets.values()) + 1.0)
         self.simulations = 0
         self.seconds = 0.0
@@ -174,8 +183,58 @@ class FmuProblem:
             self.bins, self.f, self.H_target = bins[keep], self.f[keep], H[0][keep]
             self._welch_h1 = welch_h1
 
-    def size(self, which: str | None = None) -> int:
+    # ------------------------------------------------------------------ the response stage
+    def response_target(self, nper: int) -> dict[str, Any] | None:
+        """Welch H1 responses of the record from its reference signal to every compared output.
+
+        The reference is the input column (input FMU) or the recorded current
+        (own-drive FMU with ``current``). Kept: bins up to ``0.45 fs`` where the
+        reference's PSD is at least 1e-4 of its peak and the coherence at
+        least 0.9. None when the record has no reference or fewer than 5 bins
+        are kept.
+
+        Parameters
+        ----------
+        nper : int
+            Samples per Hann segment (half overlapping).
+        """
+        if self.i_target is None:
+            return None
+        key = int(min(max(nper, 16), self.n))
+        cache = self.__dict__.setdefault("_responses", {})
+        if key in cache:
+            return cache[key]
+        from .approaches import WelchSettings, welch_h1
+
+        ws = WelchSettings(window="hann", overlap=0.5, nperseg=key)
+        outs = [o for o in self.outputs if o != self.current]
+        f, H, coh, pxx = welch_h1(self.i_target, [self.targets[o] for o in outs], self.fs, ws)
+        keep = (f > 0) & (f <= 0.45 * self.fs) & (pxx >= 1e-4 * np.max(pxx))
+        for h, c in zip(H, coh):
+            keep &= (c >= 0.9) & np.isfinite(h) & (np.abs(h) > 0)
+        if keep.sum() < 5:
+            cache[key] = None
+            return None
+        bins = np.flatnonzero(keep)
+        cache[key] = {"settings": ws, "bins": bins, "f": f[bins], "outputs": outs,
+                      "log": [np.log10(np.abs(h[bins])) for h in H]}
+        return cache[key]
+
+    def _response_residual(self, y: np.ndarray, nper: int) -> np.ndarray:
+        from .approaches import welch_h1
+
+        tg = self.response_target(nper)
+        ref = self.i_target if self.input else y[len(self.outputs)]
+        ys = [y[self.outputs.index(o)] for o in tg["outputs"]]
+        _, H, _, _ = welch_h1(ref, ys, self.fs, tg["settings"], tg["bins"])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.concatenate([np.log10(np.abs(h)) - t for h, t in zip(H, tg["log"])])
+
+    def size(self, which: str | None = None, window: int | None = None) -> int:
         """Length of the residual vector of ``which`` (default: the approach)."""
+        if which == "response":
+            tg = self.response_target(int(window or self.n // 2))
+            return int(tg["bins"].size * len(tg["outputs"])) if tg else 1
         if (which or self.approach) == "frequency":
             return int(self.bins.size)
         if self.approach == "emd":
@@ -197,7 +256,7 @@ class FmuProblem:
     def values(self, x: np.ndarray) -> dict[str, float]:
         """Parameter values (SI) of one unit-cube point, ties included."""
         ev = self.params.evaluate(np.clip(np.asarray(x, float), 0.0, 1.0))
-        return {k: float(v) for k, v in ev.values.items()}
+        return {**self.fixed, **{k: float(v) for k, v in ev.values.items()}}
 
     def simulate(self, x: np.ndarray, window: int | None = None) -> np.ndarray | None:
         """Outputs ``(n_outputs, window)`` of one unit-cube point over the first ``window`` samples (default
@@ -244,6 +303,14 @@ class FmuProblem:
         gives ``PENALTY`` everywhere.
         """
         which = which or self.approach
+        if which == "response":
+            nper = int(window or self.n // 2)
+            y = self.simulate(x)
+            if y is None:
+                return np.full(self.size(which, nper), PENALTY), PENALTY
+            r = self._response_residual(y, nper)
+            c = float(np.sqrt(np.mean(r ** 2)))
+            return (r, c) if np.isfinite(c) else (np.full(r.size, PENALTY), PENALTY)
         if window is not None and which == "time" and window < self.n:
             y = self.simulate(x, window)
             if y is None:

@@ -29,7 +29,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["batched_foh", "foh_recurrence"]
+__all__ = ["batched_foh", "foh_recurrence", "decide_hold", "HOLDS", "MAX_HELD_LEVELS"]
+
+#: Input holds of a replayed record: decided from the data, zero-order, linear.
+HOLDS = ("auto", "zoh", "linear")
+#: An input with at most this many distinct levels (and at most one per 8 samples) counts as held.
+MAX_HELD_LEVELS = 32
 
 
 def batched_foh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -79,3 +84,42 @@ def foh_recurrence(Phi: np.ndarray, Gamma0: np.ndarray, Gamma1: np.ndarray) -> n
         ``(P, n)``.
     """
     return np.einsum("pij,pj->pi", Phi, Gamma1) + Gamma0 - Gamma1
+
+
+def decide_hold(u: np.ndarray, name: str = "input") -> tuple[str, str]:
+    """The hold under which a sampled input explains its record: ``("zoh" | "linear", reason)``.
+
+    A signal that a DAC or a digital source makes (a PRBS, a step, a few
+    held levels) takes few distinct values and changes only at sample
+    instants: replaying it linearly would smear every edge over a sample, so
+    it is held (zero-order hold). A continuous signal (a measured current, a
+    sine) takes as many values as samples and is held linearly.
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        ``(n,)`` input samples (any unit).
+    name : str
+        The input's name, for the reason.
+
+    Returns
+    -------
+    hold : str
+        ``"zoh"`` when ``u`` has at most :data:`MAX_HELD_LEVELS` distinct levels and at most one
+        level per 8 samples; ``"linear"`` otherwise.
+    reason : str
+        One sentence giving the counts the choice rests on.
+    """
+    u = np.asarray(u, float).ravel()
+    n = u.size
+    span = float(np.ptp(u)) if n else 0.0
+    # levels equal to 1e-9 of the span count as one (a record printed with 12 digits)
+    q = np.round((u - u.min()) / span * 1e9) if span > 0 else np.zeros(n)
+    levels = int(np.unique(q).size)
+    changes = int(np.count_nonzero(np.diff(q)))
+    if levels <= MAX_HELD_LEVELS and levels * 8 <= n:
+        return "zoh", (f"{name} takes {levels} distinct level{'s' if levels != 1 else ''} over {n} samples and "
+                       f"changes {changes} times, only at sample instants: a held (DAC-driven) input, "
+                       "replayed with a zero-order hold")
+    return "linear", (f"{name} takes {levels} distinct values over {n} samples: a continuous input, "
+                      "replayed varying linearly between samples")

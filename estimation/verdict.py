@@ -14,7 +14,9 @@ Every answer of ``pris-cosim estimate`` carries a verdict (:func:`verdict`):
     - no parameter ends within 1e-3 (unit-cube coordinate) of a bound, unless the residual is within
       the noise floor, at least two restarts found the same values and no coupling was repaired;
     - the estimate is a minimum: a Gauss-Newton step from it would move no
-      parameter by more than 0.1 %;
+      parameter by more than 0.1 % (with ``step_within_sigma``: or by more than
+      its own 1-sigma uncertainty, when that is larger -- for a residual that is
+      strongly nonlinear at that scale, such as a long time record);
     - the restarts that reach the best cost agree on every parameter to
       within 1 %; restarts that stop at a higher cost are local minima and
       are reported (``restarts``) but do not count against convergence.
@@ -173,7 +175,8 @@ def _rel_diff(a: Mapping[str, float], b: Mapping[str, float], names: Sequence[st
 
 def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet, x: np.ndarray,
             data: np.ndarray, ends: Sequence[tuple[np.ndarray, float]] = (),
-            noise: float | None = None, scale: float | None = None) -> dict[str, Any]:
+            noise: float | None = None, scale: float | None = None, step_within_sigma: bool = False
+            ) -> dict[str, Any]:
     """Convergence verdict, uncertainties and non-identifiable parameters of an estimate.
 
     Parameters
@@ -191,12 +194,15 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
         End points of every restart (unit cube) and their residual RMS.
     noise, scale : float, optional
         Known noise standard deviation and data scale (default: from ``data``).
+    step_within_sigma : bool
+        Accept a Gauss-Newton step within each value's 1-sigma as "at the minimum".
 
     Returns
     -------
     dict
         ``converged``, ``convergence_reason``, ``uncertainty`` {name:
-        relative 1-sigma}, ``non_identifiable``, ``residual_rms``,
+        relative 1-sigma}, ``non_identifiable``, ``non_identifiable_reasons`` {name: why},
+        ``residual_rms``,
         ``noise_floor``, ``tolerance``, ``at_bound``, ``restarts`` and
         ``condition``.
     """
@@ -244,11 +250,25 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
     J = fi.pop("jacobian")
     if np.all(np.isfinite(r)) and r.size:
         step = np.linalg.lstsq(J, -r, rcond=1e-12)[0]
-        moving = [k for k, d in zip(names, step) if abs(d) > STEP_TOL and k not in fi["null"]]
+        # with ``step_within_sigma``, a step within a value's own 1-sigma is no evidence of a better minimum
+        moving = [k for k, d in zip(names, step)
+                  if abs(d) > max(STEP_TOL, unc[k] if step_within_sigma and math.isfinite(unc[k]) else 0.0)
+                  and k not in fi["null"]]
         if moving:
             reasons.append("not at a minimum: a Gauss-Newton step would move "
                            + ", ".join(f"{k} by {100 * d:+.3g} %" for k, d in zip(names, step) if k in moving))
     non_ident = [k for k in names if not unc[k] <= UNCERTAIN or k in differing]
+    why: dict[str, str] = {}
+    for k in non_ident:
+        parts = []
+        if k in fi["null"]:
+            parts.append("in a null direction of the residuals' Jacobian (its effect is matched by others)")
+        elif not unc[k] <= UNCERTAIN:
+            parts.append(f"Fisher-information 1-sigma {100 * unc[k]:.3g} % (above {100 * UNCERTAIN:g} %)")
+        if k in differing:
+            parts.append("restarts that fit equally well differ on it by more than "
+                         f"{100 * AGREE:g} %")
+        why[k] = "; ".join(parts)
     if non_ident:
         reasons.append(f"not identifiable from these data: {', '.join(non_ident)}")
     converged = not reasons
@@ -259,6 +279,7 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
                                if converged else "; ".join(reasons)),
         "uncertainty": unc,
         "non_identifiable": non_ident,
+        "non_identifiable_reasons": why,
         "residual_rms": rms,
         "noise_floor": noise,
         "tolerance": tol,

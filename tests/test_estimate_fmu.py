@@ -203,6 +203,10 @@ def test_fmi3_fmu_in_the_loop(tmp_path):
     ({"budget": 5}, "budget"),
     ({"design_score": "luck"}, "design_score"),
     ({"outputs": ["v_mid"]}, "v_mid"),  # an FMU output the record does not hold
+    ({"values": {"R_nowhere": 1.0}}, "R_nowhere"),
+    ({"values": {"C1": "small"}}, "C1"),
+    ({"values": {"C2": 1e-9}}, "C2"),  # also tied
+    ({"input_hold": "cubic"}, "input_hold"),
 ])
 def test_bad_fmu_config_one_line(tmp_path, two_record, change, needle):
     cfg = _fmu_cfg(two_record)
@@ -213,3 +217,32 @@ def test_bad_fmu_config_one_line(tmp_path, two_record, change, needle):
                         str(tmp_path / "o")], capture_output=True, text=True, timeout=120, cwd=REPO)
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and needle in r.stderr, r.stderr
+
+
+def test_hold_decided_from_the_input():
+    """Few levels changing only at samples are held; a sampled sine is not."""
+    from estimation.holds import decide_hold
+
+    rng = np.random.default_rng(3)
+    prbs = np.repeat(np.where(rng.random(300) < 0.5, -2.5, 2.5), 7)
+    assert decide_hold(prbs, "u")[0] == "zoh"
+    assert "2 distinct levels" in decide_hold(prbs, "u")[1]
+    steps = np.repeat(rng.integers(0, 16, 100) * 0.25, 3)  # a 4-bit DAC staircase
+    assert decide_hold(steps)[0] == "zoh"
+    sine = np.sin(2 * np.pi * 0.013 * np.arange(2000))
+    assert decide_hold(sine)[0] == "linear"
+    assert decide_hold(np.linspace(0, 1, 500))[0] == "linear"  # a ramp
+
+
+def test_values_set_for_every_run(tmp_path, two_record):
+    """A parameter given in "values" is set in every run and reported, not estimated."""
+    cfg = _fmu_cfg(two_record)
+    cfg["parameters"] = {"C1": {"min": 0.5e-9, "max": 2e-9}}
+    cfg["ties"] = {"C2": "C1"}
+    cfg["values"] = {"R1": 10.0, "R2": 10.0, "L1": 10.0, "L2": 100.0, "M12": 30.0}
+    cfg["budget"] = {"design": 4, "candidates": 2, "restarts": 1, "simulations": 12}
+    cfg["target"]["values"] = {"C1": 1e-9}
+    a = run_estimate(cfg, progress=False, out=str(tmp_path / "o"), scheduler="serial")
+    assert a["values"] == cfg["values"] and set(a["estimate"]) == {"C1"}
+    assert a["input_hold"] is None  # an arrangement FMU makes its own drive
+    assert abs(a["errors_percent"]["C1"]) < 1.0, a

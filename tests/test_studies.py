@@ -130,6 +130,7 @@ def test_estimate_command_from_a_config(tmp_path):
     ("{not json", "not valid JSON"),
     (json.dumps({"model": "two-section", "approach": "magic"}), "approach"),
     (json.dumps({"model": "two-section", "bogus": 1}), "bogus"),
+    (json.dumps({"model": "two-section", "values": {"R1": 1}}), "values"),
 ])
 def test_estimate_bad_config_exits_2_with_one_line(tmp_path, content, words):
     path = tmp_path / "bad.json"

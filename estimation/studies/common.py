@@ -23,15 +23,18 @@ import math
 import sys
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..executor import ResultsStore, Task, atomic_write_text, run_tasks, to_jsonable
+from ..local_search import PolishResult, Recorder, least_squares_polish, optimise
 from ..optimisers import Budget, OptimResult, minimize
 from ..parameters import ParameterSet, identifiability
+
+
+__all__ = ["PolishResult", "Recorder", "least_squares_polish", "optimise"]  # re-exported from local_search
 
 
 class StudyError(ValueError):
@@ -41,31 +44,6 @@ class StudyError(ValueError):
 def say(text: str) -> None:
     """Progress line on stderr."""
     print(text, file=sys.stderr, flush=True)
-
-
-# ====================================================================== recording objective
-class Recorder:
-    """Wrap a batched objective and keep every evaluated point and cost (for minima analysis)."""
-
-    def __init__(self, fun: Callable[[np.ndarray], np.ndarray], keep: int = 200_000):
-        self.fun = fun
-        self.U: list[np.ndarray] = []
-        self.f: list[np.ndarray] = []
-        self.keep = keep
-        self.count = 0
-
-    def __call__(self, U: np.ndarray) -> np.ndarray:
-        f = np.asarray(self.fun(U), float)
-        if self.count < self.keep:
-            self.U.append(np.array(U, float, copy=True))
-            self.f.append(f.copy())
-        self.count += len(f)
-        return f
-
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        if not self.U:
-            return np.zeros((0, 0)), np.zeros(0)
-        return np.concatenate(self.U), np.concatenate(self.f)
 
 
 def errors_percent(estimate: Mapping[str, float], target: Mapping[str, float]) -> dict[str, float]:
@@ -170,15 +148,7 @@ def jacobian_identifiability(residuals: Callable[[np.ndarray], np.ndarray], para
             "non_identifiable": sorted({n for g in res.groups for n in g} | set(res.insensitive))}
 
 
-# ====================================================================== one optimisation
-def optimise(approach: Any, method: str, seed: int, budget: Budget, options: Mapping[str, Any] | None = None,
-             x0: Any = None) -> tuple[OptimResult, Recorder]:
-    """Run one optimiser on an approach's ``cost_batch`` with a recording wrapper."""
-    rec = Recorder(approach.cost_batch)
-    res = minimize(rec, approach.n, method=method, seed=seed, budget=budget, options=dict(options or {}), x0=x0)
-    return res, rec
-
-
+# ====================================================================== local probes
 def local_probes(approach: Any, seed: int, count: int, budget_evals: int,
                  local_options: Mapping[str, Any] | None = None) -> list[OptimResult]:
     """``count`` extra local solves from seeded random starts (to find other equal-cost minima)."""
@@ -259,67 +229,3 @@ def comparison_table(rows: Iterable[Mapping[str, Any]], thesis: Mapping[str, Map
 
 def elapsed(t0: float) -> float:
     return time.perf_counter() - t0
-
-
-def least_squares_polish(approach: Any, x0: np.ndarray, max_nfev: int = 60, step: float = 1e-6,
-                         max_time_s: float | None = None) -> dict[str, Any]:
-    """Trust-region least squares on the approach's residuals from ``x0`` (Jacobian-scaled steps).
-
-    The sum of squared log-magnitude errors (4.21) is a least-squares cost;
-    a Gauss-Newton trust region with ``x_scale="jac"`` moves weakly
-    sensitive parameters (the winding resistance) that a quasi-Newton
-    method on the summed cost leaves where they are. The Jacobian is one
-    batched forward-difference population per iteration.
-
-    Returns
-    -------
-    dict
-        ``x`` (unit cube), ``fun`` (sum of squares), ``nfev`` (points), ``message``.
-    """
-    from scipy.optimize import least_squares
-
-    n = approach.n
-    count = {"points": 0}
-    t0 = time.perf_counter()
-
-    def res(u: np.ndarray) -> np.ndarray:
-        count["points"] += 1
-        return approach.residuals(np.clip(u, 0, 1)[None])[0]
-
-    def jac(u: np.ndarray) -> np.ndarray:
-        h = np.where(u + step <= 1, step, -step)
-        pts = np.clip(np.vstack([u, u + np.diag(h)]), 0, 1)
-        r = approach.residuals(pts)
-        count["points"] += n + 1
-        if max_time_s is not None and time.perf_counter() - t0 > max_time_s:
-            raise _Timeout
-        return ((r[1:] - r[0]) / h[:, None]).T
-
-    x = np.clip(np.asarray(x0, float), 0, 1)
-    try:
-        out = least_squares(res, x, jac=jac, bounds=(0, 1), x_scale="jac", method="trf", ftol=1e-15, xtol=1e-15,
-                            gtol=1e-15, max_nfev=max_nfev)
-        xb, msg = out.x, out.message
-    except _Timeout:
-        xb, msg = x, "time limit"
-    r = approach.residuals(xb[None])[0]
-    f = float(np.sum(r ** 2))
-    r0 = approach.residuals(x[None])[0]
-    if float(np.sum(r0 ** 2)) < f:
-        xb, f = x, float(np.sum(r0 ** 2))
-    return {"x": xb, "fun": f, "nfev": count["points"], "message": msg}
-
-
-class _Timeout(Exception):
-    pass
-
-
-@dataclass
-class PolishResult:
-    """Outcome of :func:`least_squares_polish` (the fields an :class:`OptimResult` row uses)."""
-
-    x: np.ndarray
-    fun: float
-    nfev: int
-    message: str
-    wall_s: float = 0.0

@@ -1,0 +1,208 @@
+"""Local searches shared by every estimation engine: the recorded optimiser run, the least-squares polish,
+and the staged least squares with budgets that stop on progress.
+
+- :class:`Recorder` wraps a batched objective and keeps every evaluated point;
+- :func:`optimise` runs one optimiser of :mod:`estimation.optimisers` on an approach's ``cost_batch``;
+- :func:`least_squares_polish` is a trust-region least squares on an approach's residuals (batched Jacobian);
+- :func:`staged_least_squares` runs a trust-region least squares per stage of a continuation (any residual
+  function, e.g. an FMU run per evaluation), each stage stopping when it converges, when its best cost stops
+  falling (progress), or at a cap of evaluations; it reports the evaluations of every stage.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .optimisers import Budget, OptimResult, minimize
+
+__all__ = ["Recorder", "optimise", "least_squares_polish", "PolishResult", "staged_least_squares",
+           "STALL_FRACTION", "STALL_SPAN"]
+
+#: A stage stops when its best cost fell by less than this fraction over its last ``STALL_SPAN (n + 1)`` evaluations.
+STALL_FRACTION = 1e-4
+STALL_SPAN = 4
+
+
+class Recorder:
+    """Wrap a batched objective and keep every evaluated point and cost (for minima analysis)."""
+
+    def __init__(self, fun: Callable[[np.ndarray], np.ndarray], keep: int = 200_000):
+        self.fun = fun
+        self.U: list[np.ndarray] = []
+        self.f: list[np.ndarray] = []
+        self.keep = keep
+        self.count = 0
+
+    def __call__(self, U: np.ndarray) -> np.ndarray:
+        f = np.asarray(self.fun(U), float)
+        if self.count < self.keep:
+            self.U.append(np.array(U, float, copy=True))
+            self.f.append(f.copy())
+        self.count += len(f)
+        return f
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        if not self.U:
+            return np.zeros((0, 0)), np.zeros(0)
+        return np.concatenate(self.U), np.concatenate(self.f)
+
+
+def optimise(approach: Any, method: str, seed: int, budget: Budget, options: Mapping[str, Any] | None = None,
+             x0: Any = None) -> tuple[OptimResult, Recorder]:
+    """Run one optimiser on an approach's ``cost_batch`` with a recording wrapper."""
+    rec = Recorder(approach.cost_batch)
+    res = minimize(rec, approach.n, method=method, seed=seed, budget=budget, options=dict(options or {}), x0=x0)
+    return res, rec
+
+
+def least_squares_polish(approach: Any, x0: np.ndarray, max_nfev: int = 60, step: float = 1e-6,
+                         max_time_s: float | None = None) -> dict[str, Any]:
+    """Trust-region least squares on the approach's residuals from ``x0`` (Jacobian-scaled steps).
+
+    The sum of squared log-magnitude errors (4.21) is a least-squares cost;
+    a Gauss-Newton trust region with ``x_scale="jac"`` moves weakly
+    sensitive parameters (the winding resistance) that a quasi-Newton
+    method on the summed cost leaves where they are. The Jacobian is one
+    batched forward-difference population per iteration.
+
+    Returns
+    -------
+    dict
+        ``x`` (unit cube), ``fun`` (sum of squares), ``nfev`` (points), ``message``.
+    """
+    from scipy.optimize import least_squares
+
+    n = approach.n
+    count = {"points": 0}
+    t0 = time.perf_counter()
+
+    def res(u: np.ndarray) -> np.ndarray:
+        count["points"] += 1
+        return approach.residuals(np.clip(u, 0, 1)[None])[0]
+
+    def jac(u: np.ndarray) -> np.ndarray:
+        h = np.where(u + step <= 1, step, -step)
+        pts = np.clip(np.vstack([u, u + np.diag(h)]), 0, 1)
+        r = approach.residuals(pts)
+        count["points"] += n + 1
+        if max_time_s is not None and time.perf_counter() - t0 > max_time_s:
+            raise _Timeout
+        return ((r[1:] - r[0]) / h[:, None]).T
+
+    x = np.clip(np.asarray(x0, float), 0, 1)
+    try:
+        out = least_squares(res, x, jac=jac, bounds=(0, 1), x_scale="jac", method="trf", ftol=1e-15, xtol=1e-15,
+                            gtol=1e-15, max_nfev=max_nfev)
+        xb, msg = out.x, out.message
+    except _Timeout:
+        xb, msg = x, "time limit"
+    r = approach.residuals(xb[None])[0]
+    f = float(np.sum(r ** 2))
+    r0 = approach.residuals(x[None])[0]
+    if float(np.sum(r0 ** 2)) < f:
+        xb, f = x, float(np.sum(r0 ** 2))
+    return {"x": xb, "fun": f, "nfev": count["points"], "message": msg}
+
+
+class _Timeout(Exception):
+    pass
+
+
+@dataclass
+class PolishResult:
+    """Outcome of :func:`least_squares_polish` (the fields an :class:`OptimResult` row uses)."""
+
+    x: np.ndarray
+    fun: float
+    nfev: int
+    message: str
+    wall_s: float = 0.0
+
+
+class _Spent(Exception):
+    pass
+
+
+class _Stalled(Exception):
+    pass
+
+
+def staged_least_squares(residual: Callable[[np.ndarray, Any], tuple[np.ndarray, float]], x0: np.ndarray,
+                         stages: Sequence[Any], cap: int, counter: Callable[[], int],
+                         label: Callable[[Any], str] = str, diff_step: float = 1e-5, finish: bool = True
+                         ) -> dict[str, Any]:
+    """Trust-region least squares in the unit cube, one per stage, each starting where the last ended.
+
+    Every stage but the last (every stage when ``finish`` is false) also stops when its best cost fell by
+    less than :data:`STALL_FRACTION` over its last ``STALL_SPAN (n + 1)`` evaluations; the last runs to the
+    minimum (or the cap): near the noise its cost hardly falls while the values still move.
+
+    Parameters
+    ----------
+    residual : callable
+        ``residual(x, stage) -> (r, cost)``: residual vector and cost of a unit-cube point for a stage.
+    x0 : numpy.ndarray
+        ``(n,)`` start in the unit cube.
+    stages : sequence
+        The stages, passed to ``residual`` as they are.
+    cap : int
+        At most this many evaluations per stage (as counted by ``counter``).
+    counter : callable
+        The evaluations made so far (e.g. FMU runs).
+    label : callable
+        Text of a stage for the messages.
+    diff_step : float
+        Finite-difference step of the two-point Jacobian (unit cube).
+    finish : bool
+        Run the last stage to its minimum (no stop on progress).
+
+    Returns
+    -------
+    dict
+        ``x``, ``cost`` (the last stage's best), ``message`` (one clause per stage: converged, stopped on
+        progress or at the cap), ``per_stage`` [{``stage``, ``runs``, ``cost``}].
+    """
+    from scipy.optimize import least_squares
+
+    x = np.clip(np.asarray(x0, float), 0.0, 1.0)
+    span = STALL_SPAN * (x.size + 1)
+    messages, per_stage = [], []
+    best: dict[str, Any] = {"x": x.tolist(), "cost": math.inf}
+    for k, stage in enumerate(stages):
+        stalls = k < len(stages) - 1 or not finish
+        start = counter()
+        best = {"x": [float(v) for v in x], "cost": math.inf}
+        trace: list[float] = []
+
+        def fun(z: np.ndarray, stage: Any = stage, start: int = start, stalls: bool = stalls) -> np.ndarray:
+            if counter() - start >= cap:
+                raise _Spent
+            if (stalls and len(trace) > span
+                    and trace[-1] > trace[-1 - span] * (1.0 - STALL_FRACTION)):
+                raise _Stalled
+            r, c = residual(z, stage)
+            if c < best["cost"]:
+                best["x"], best["cost"] = [float(v) for v in z], float(c)
+            trace.append(best["cost"])
+            return r
+
+        text = label(stage)
+        try:
+            sol = least_squares(fun, x, jac="2-point", bounds=(0.0, 1.0), method="trf", diff_step=diff_step,
+                                x_scale="jac", ftol=1e-12, xtol=1e-10, gtol=1e-12, max_nfev=10 * cap)
+            messages.append(f"{text}: {sol.message}")
+        except _Spent:
+            messages.append(f"{text}: stopped at the cap of {cap} runs")
+        except _Stalled:
+            messages.append(f"{text}: stopped on progress (cost fell < {STALL_FRACTION:g} over {span} runs)")
+        if not math.isfinite(best["cost"]):
+            best["cost"] = float(residual(np.asarray(best["x"]), stage)[1])
+        x = np.asarray(best["x"], float)
+        per_stage.append({"stage": text, "runs": counter() - start, "cost": best["cost"]})
+    return {"x": best["x"], "cost": best["cost"], "message": "; then ".join(messages), "per_stage": per_stage}
