@@ -74,10 +74,11 @@ def subspace_model(u: np.ndarray, y: np.ndarray, order: int, block_rows: int
 
     The past-output MOESP subspace method (Verhaegen, 1994): block Hankel
     matrices of the past and future input and output samples, an LQ
-    factorisation (here the Cholesky factor of the Gram matrix), and the SVD of the part of the future outputs that the past
-    (the instruments) explains; the leading ``order`` left singular vectors span
-    the extended observability matrix, whose shift invariance gives ``A`` and
-    whose first row gives ``c``. White output noise is uncorrelated with the
+    factorisation (here the Cholesky factor of the Gram matrix), and the SVD
+    of the part of the future outputs that the past (the instruments)
+    explains; the leading ``order`` left singular vectors span the extended
+    observability matrix, whose shift invariance gives ``A`` and whose first
+    row gives ``c``. White output noise is uncorrelated with the
     instruments, so the model is consistent under noise, and every sample of
     the record counts (unlike a window of free ringing). ``b``, ``d`` and the
     initial state then follow from linear least squares on the record.
