@@ -139,8 +139,7 @@ GLOBAL_METHODS = {"ga": "ga", "pso": "pso", "cma": "cma_es"}
 DRIVES = ("bridge", "current")
 #: Reference noise level of the Fisher information when a run has no noise, dB.
 FISHER_SNR_DB = 40.0
-#: Exponentials fitted to the free ringing, and the oscillatory modes kept (the strongest).
-MODAL_ORDER = 16
+#: Oscillatory modes the modal stage matches (the strongest).
 MODAL_MODES = 3
 #: Subspace identification of the target's modes from its whole record: state order and block rows.
 SUBSPACE_ORDER, SUBSPACE_ROWS = 8, 400
