@@ -106,7 +106,9 @@ def aggregate(runs: Sequence[Mapping[str, Any]], key: Callable[[Mapping[str, Any
     signed errors over seeds), ``abs_error_percent_max_median`` (median over
     seeds of the worst parameter's error), ``evaluations`` (median per run),
     ``evals_per_s`` (all evaluations over all wall time), ``wall_s`` (median)
-    and ``wall_s_total``.
+    and ``wall_s_total``; with a Cramer-Rao bound on the runs (``bound_percent``)
+    also ``efficiency`` (median ``|error|`` over seeds / bound, per parameter),
+    ``efficiency_median`` and ``efficiency_max`` (over the parameters).
     """
     cells: dict[Any, list[Mapping[str, Any]]] = {}
     for r in runs:
@@ -121,7 +123,8 @@ def aggregate(runs: Sequence[Mapping[str, Any]], key: Callable[[Mapping[str, Any
         row = dict(best)
         row.update({
             "seeds": [r["settings"]["seed"] for r in group],
-            "success_rate": float(np.mean([success(r["errors_percent"]) for r in group])),
+            "success_rate": float(np.mean([bool(r.get("success", success(r["errors_percent"]))) for r in group])),
+            "success_rate_5pct": float(np.mean([success(r["errors_percent"]) for r in group])),
             "errors_percent_median": dict(zip(names, np.median(E, axis=0).tolist())),
             "errors_percent_range": {k: [float(E[:, i].min()), float(E[:, i].max())] for i, k in enumerate(names)},
             "abs_error_percent_max_median": float(np.median(np.max(np.abs(E), axis=1))),
@@ -133,5 +136,13 @@ def aggregate(runs: Sequence[Mapping[str, Any]], key: Callable[[Mapping[str, Any
             "traces": [r.get("trace", []) for r in group],
         })
         row.pop("trace", None)
+        bound = best.get("bound_percent")
+        if bound:
+            eff = {k: float(np.median(np.abs(E[:, i]))) / bound[k] if bound.get(k, 0) > 0 else math.nan
+                   for i, k in enumerate(names)}
+            finite = [v for v in eff.values() if math.isfinite(v)]
+            row.update({"efficiency": eff,
+                        "efficiency_median": float(np.median(finite)) if finite else math.nan,
+                        "efficiency_max": float(max(finite)) if finite else math.nan})
         rows.append(row)
     return rows

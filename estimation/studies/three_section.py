@@ -46,11 +46,18 @@ the ringing is not matched. Measured with the quick budgets (tens of
 thousands of evaluations) GA, PSO and CMA-ES on the time cost alone all end
 in that valley. With the bridge drive the time, EMD and IEMD paths therefore
 start with a modal stage (:mod:`estimation.studies.modal`): the chosen
-optimiser matches the arrangement's modes to those the matrix-pencil method
-reads off the target's free ringing, then the approach's own cost is
-minimised from there (:func:`_run_modal`). Noise-free this reaches the true
-parameters; below about 60 dB SNR the mode estimates from the 60 us of free
-ringing degrade, and so do the estimates.
+optimiser matches the arrangement's modes (frequencies, and with small
+weights damping ratios and residues) to those of a subspace model of the
+whole record from the commanded bridge voltage to the terminal voltage
+(PO-MOESP, :func:`record_modes`; consistent under white output noise, and
+every sample counts, where a window of free ringing held 60 us). A voltage
+least squares with the mode frequencies held as a soft constraint
+(:class:`modal.ModeConstrained`) then fits the rest of the response without
+letting a mode slide into a neighbouring valley, and the approach's own cost
+is minimised from there (:func:`_run_modal`; the EMD and correlation costs by
+the local solver inside a small box around that start). At 20 dB SNR the
+630 us record shows only the 107 kHz and 723 kHz modes to the subspace
+model; the stage uses those two.
 
 The frequency path (RMSE) has several valleys of nearly equal depth (the
 two sharp resonances matched by different Cs/Ls/k combinations). It starts
@@ -58,7 +65,17 @@ from the target's resonance frequencies (peaks of its Welch ``Zin`` on every
 bin, :func:`frequency_peaks`): the optimiser is restarted on the analytic
 impedance plus those resonances (:func:`resonance_proxy`), and the lowest
 minima are polished by least squares on the simulated residuals
-(:func:`_run_frequency_staged`).
+(:func:`_run_frequency_staged`). Under noise the peaks of a single Welch
+estimate are no longer the resonances (the current's noise dominates above
+about 100 kHz and forms peaks of its own): the resonances are then the
+arrangement's modes from a subspace model of the first 10 ms of the record
+(:func:`frequency_record_modes`), and both least-squares stages weight each
+compared bin by the inverse of the local noise of the target's
+``log10 |Zin|`` (:func:`bin_weights`).
+
+Under noise each run carries the Cramer-Rao bound of its approach's data
+at its SNR (:func:`cell_bound`, :mod:`estimation.studies.bounds`) and
+succeeds when every parameter is within ``max(5 %, 3 x bound)``.
 
 Statistics (``seeds``), noise (``snr_db``: white Gaussian noise on the
 target waveforms, :func:`estimation.studies.cells.add_noise`) and the
@@ -76,6 +93,7 @@ over (Rs, Ls), written as ``search_space_<approach>.png`` and
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Sequence
@@ -113,15 +131,31 @@ APPROACHES = ["frequency", "time", "emd", "iemd"]
 #: Resonance peaks of the target's Zin used by the frequency path's first stage: prominence (decades),
 #: at most this many, weight of their log-frequency residuals against the 200 log-magnitude residuals.
 PEAK_PROMINENCE, PEAK_COUNT, PEAK_WEIGHT = 0.3, 6, 100.0
+#: A peak's prominence must also reach this many times the local noise of log10 |Zin| (modal.local_noise).
+PEAK_NOISE_FACTOR = 8.0
 OPTIMISERS = ["ga", "pso", "cma"]
 #: Global phase of each optimiser name (the hybrid's first stage).
 GLOBAL_METHODS = {"ga": "ga", "pso": "pso", "cma": "cma_es"}
 DRIVES = ("bridge", "current")
 #: Reference noise level of the Fisher information when a run has no noise, dB.
 FISHER_SNR_DB = 40.0
-#: Exponentials fitted to the free ringing, and the oscillatory modes kept (the strongest).
-MODAL_ORDER = 16
+#: Oscillatory modes the modal stage matches (the strongest).
 MODAL_MODES = 3
+#: Subspace identification of the target's modes from its whole record: state order and block rows.
+SUBSPACE_ORDER, SUBSPACE_ROWS = 8, 400
+#: A further mode is kept when its resonance height is at least this fraction of the previous one's.
+MODE_HEIGHT_RATIO = 0.1
+#: Samples of the frequency path's record given to the subspace model (10 ms at 2.5 MHz).
+SUBSPACE_SAMPLES_FRF = 25_000
+#: Noise floor of the frequency path's bin weights, decades of log10 |Zin|.
+BIN_NOISE_FLOOR = 1e-3
+#: Weights of the log damping-ratio and log residue residuals of the modal stage (frequencies: 1).
+MODAL_DAMPING_WEIGHT, MODAL_RESIDUE_WEIGHT = 0.01, 0.03
+#: Half-width (unit-cube units) of the box around the voltage fit in which the local solver refines the
+#: EMD and correlation costs: the refinement stays in the basin the first stages found.
+LOCAL_BOX = 0.02
+#: Weight of the mode-frequency constraint in the constrained voltage fit (own residuals: RMS units).
+MODE_CONSTRAINT_WEIGHT = 1e3
 METRICS = ["rmse", "correlation"]
 SHOWN = NAMES
 SLICE = ("Rs", "Ls")
@@ -297,6 +331,7 @@ def optimiser_settings(approach: str, optimiser: str, quick: bool) -> dict[str, 
             "options": {"global_options": glob, "local_options": local, "global_share": 0.9},
             "budget": Budget(max_evals=evals), "polish_iterations": polish, "polish_time_s": polish_time,
             "modal": {"restarts": (2 if approach == "emd" else 3) if quick else 8, "budget": Budget(max_evals=8000),
+                      "constrained_iterations": 60 if quick else 150, "guide_restarts": 8 if quick else 16,
                       "options": {"global_options": mglob, "local_options": {"max_iter": 50}, "global_share": 0.9},
                       "own_local_evals": (60 if approach == "emd" else 2000) if quick else
                                          (1000 if approach == "emd" else 10000)},
@@ -306,7 +341,29 @@ def optimiser_settings(approach: str, optimiser: str, quick: bool) -> dict[str, 
 
 def run_one(approach: str, optimiser: str, metric: str, quick: bool = True, seed: int = 1,
             snr_db: float | None = None, drive: str = "bridge") -> dict[str, Any]:
-    """One run of Tables 4.9/4.10 (approach x optimiser x cost metric, one seed, one noise level); one row."""
+    """One run of Tables 4.9/4.10 (approach x optimiser x cost metric, one seed, one noise level); one row.
+
+    Under noise the row carries the cell's Cramer-Rao bound (``bound_percent``,
+    :func:`cell_bound`), each parameter's success limit ``max(5 %, 3 x bound)``
+    (``limit_percent``), and ``success`` judged against those limits
+    (``success_5pct``: every parameter within 5 %).
+    """
+    from . import bounds
+
+    row = _run_one(approach, optimiser, metric, quick, seed, snr_db, drive)
+    row["success_5pct"] = cells.success(row["errors_percent"])
+    if snr_db is not None:
+        cb = cached_bound(approach, float(snr_db))
+        row["bound_percent"] = dict(cb["bound_percent"])
+        row["bound_data"] = cb["data"]
+        row["limit_percent"] = {k: bounds.limit_percent(row["bound_percent"], k) for k in NAMES}
+        row["success"] = bounds.within(row["errors_percent"], row["bound_percent"])
+        row["success_rate"] = float(row["success"])
+    return row
+
+
+def _run_one(approach: str, optimiser: str, metric: str, quick: bool = True, seed: int = 1,
+             snr_db: float | None = None, drive: str = "bridge") -> dict[str, Any]:
     t0 = time.perf_counter()
     params = make_params()
     a = build_approach(approach, metric, params, snr_db, seed, drive)
@@ -365,14 +422,58 @@ def run_one(approach: str, optimiser: str, metric: str, quick: bool = True, seed
     }
 
 
-def modal_guide(params: ParameterSet, snr_db: float | None = None, seed: int = 1) -> modal.ModalGuide:
-    """First-stage cost of the time paths: the target's ringing modes (matrix pencil) against the estimate's."""
-    w = time_target(snr_db, seed)
-    s0, s1 = modal.free_segment(w["v_bprbs"])
-    poles, amp = modal.matrix_pencil(w["v_in"][s0:s1], MODAL_ORDER, FS_TIME)
-    f, z = modal.oscillatory(poles, amp, MODAL_MODES)
+def modal_guide(params: ParameterSet, snr_db: float | None = None, seed: int = 1,
+                waveforms: dict[str, np.ndarray] | None = None) -> modal.ModalGuide:
+    """First-stage cost of the time paths: the target's ringing modes against the estimate's.
+
+    The modes are those of a subspace model of the whole record from the
+    commanded bridge voltage to the terminal voltage (:func:`record_modes`):
+    frequencies, damping ratios and residue magnitudes.
+    """
+    f, z, r = record_modes(waveforms) if waveforms is not None else _target_modes(snr_db, seed)
     engine = ap.PrisEngine(get_model(NAME).circuit, PORT, SOURCE_TIME, FS_TIME, 2, probes=[])
-    return modal.ModalGuide(params, engine, f, z)
+    return modal.ModalGuide(params, engine, f, z, damping_weight=MODAL_DAMPING_WEIGHT, residue_target=r,
+                            residue_weight=MODAL_RESIDUE_WEIGHT, fs=FS_TIME)
+
+
+@functools.lru_cache(maxsize=8)
+def _target_modes(snr_db: float | None, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return record_modes(time_target(snr_db, seed))
+
+
+def record_modes(w: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Frequencies (Hz), damping ratios and |residues| of the target's ringing modes from its whole record.
+
+    A PO-MOESP model (:func:`modal.subspace_model`, order :data:`SUBSPACE_ORDER`,
+    :data:`SUBSPACE_ROWS` block rows) from the commanded bridge voltage to ``v_in``.
+    Its oscillatory modes between 1 kHz and ``fs / 5`` (a slightly unstable pole
+    from noise counts with its damping's magnitude) are ranked by their resonance
+    height ``|r| / (|zeta| 2 pi f / fs)``; the strongest :data:`MODAL_MODES` are kept
+    while each is at least :data:`MODE_HEIGHT_RATIO` times the one before (weaker
+    ones are noise modes of the subspace model; at 20 dB SNR the 886 kHz mode is
+    among them and the stage uses the two it can see).
+    """
+    A, b, c, _ = modal.subspace_model(w["v_bprbs"], w["v_in"], SUBSPACE_ORDER, SUBSPACE_ROWS)
+    poles, res = modal.discrete_modes(A, b, c, FS_TIME)
+    return _strongest_modes(poles, res, FS_TIME)
+
+
+def _strongest_modes(poles: np.ndarray, res: np.ndarray, fs: float, f_max: float | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    f_p = poles.imag / (2 * np.pi)
+    zeta = np.abs(poles.real) / np.maximum(np.abs(poles), 1e-300)
+    top = fs / 5 if f_max is None else f_max
+    cand = np.flatnonzero((poles.imag > 0) & (f_p > 1e3) & (f_p < top) & (zeta < 0.05))
+    height = np.abs(res[cand]) / np.maximum(zeta[cand] * 2 * np.pi * f_p[cand] / fs, 1e-300)
+    order = np.argsort(height)[::-1]
+    keep: list[int] = []
+    for i in order[:MODAL_MODES]:
+        if len(keep) >= 2 and height[i] < MODE_HEIGHT_RATIO * height[keep[-1]]:
+            break
+        keep.append(int(i))
+    sel = cand[keep]
+    sel = sel[np.argsort(f_p[sel])]
+    return f_p[sel], zeta[sel], np.abs(res[sel])
 
 
 def _run_modal(a: ap.Approach, params: ParameterSet, approach: str, optimiser: str, metric: str, quick: bool,
@@ -384,19 +485,37 @@ def _run_modal(a: ap.Approach, params: ParameterSet, approach: str, optimiser: s
     guide = modal_guide(params, snr_db, seed)
     m = plan["modal"]
     own_ls = metric == "rmse" and approach in ("time", "iemd")
+    volt = a if approach == "time" and metric == "rmse" else build_approach("time", "rmse", params, snr_db, seed)
+    fit = modal.ModeConstrained(volt, guide, math.sqrt(volt.v_target.size), MODE_CONSTRAINT_WEIGHT)
     best_x, best_c, nfev, trace, notes = None, math.inf, 0, [], []
-    for k in range(m["restarts"]):
+    # the modal guide is cheap (eigenvalues): more restarts of it, the lowest distinct minima go on
+    guided: list[tuple[float, np.ndarray]] = []
+    for k in range(max(m["restarts"], int(m.get("guide_restarts", m["restarts"])))):
         r1, _ = common.optimise(guide, plan["method"], 1000 * seed + k, m["budget"], m["options"])
         p1 = common.least_squares_polish(guide, r1.x, max_nfev=50)
         nfev += int(r1.nfev) + int(p1["nfev"])
-        x = np.asarray(p1["x"])
+        guided.append((float(p1["fun"]), np.asarray(p1["x"])))
+    guided.sort(key=lambda t: t[0])
+    starts: list[tuple[float, np.ndarray]] = []
+    for g in guided:
+        if all(np.max(np.abs(g[1] - y)) > 1e-3 for _, y in starts):
+            starts.append(g)
+    starts = starts[: m["restarts"]]
+    for k, (modal_cost, x1) in enumerate(starts):
+        p1 = {"fun": modal_cost}
+        n_fit = max(1, int(m.get("constrained_iterations", plan["polish_iterations"])))
+        p1b = common.least_squares_polish(fit, x1, max_nfev=n_fit, max_time_s=plan["polish_time_s"])
+        nfev += int(p1b["nfev"])
+        x = np.asarray(p1b["x"])
         if own_ls:
             p2 = common.least_squares_polish(a, x, max_nfev=plan["polish_iterations"], max_time_s=plan["polish_time_s"])
             x, n2 = np.asarray(p2["x"]), int(p2["nfev"])
         else:
-            r2 = minimize(a.cost_batch, a.n, method="local", seed=seed, x0=x,
-                          budget=Budget(max_evals=m["own_local_evals"]), options={"max_iter": 200})
-            x, n2 = r2.x, int(r2.nfev)
+            box = modal.Box(x, LOCAL_BOX)
+            r2 = minimize(lambda U: a.cost_batch(box.to_outer(U)), a.n, method="local", seed=seed,
+                          x0=box.to_inner(x), budget=Budget(max_evals=m["own_local_evals"]),
+                          options={"max_iter": 200})
+            x, n2 = box.to_outer(np.asarray(r2.x)[None])[0], int(r2.nfev)
         c = float(a.cost_batch(x[None])[0])
         nfev += n2 + 1
         trace.append([float(nfev), min(c, best_c)])
@@ -409,8 +528,8 @@ def _run_modal(a: ap.Approach, params: ParameterSet, approach: str, optimiser: s
     errors = common.errors_percent(est, TARGET)
     wall = time.perf_counter() - t0
     second = "least squares on the cost's residuals" if own_ls else "local solver on the cost"
-    method = (f"{m['restarts']} x [{plan['method']} on the modal guide -> least squares] -> {second}; "
-              "lowest cost kept")
+    method = (f"{m['restarts']} x [{plan['method']} on the modal guide -> least squares -> voltage least squares "
+              f"with the mode frequencies held -> {second}]; lowest cost kept")
     return {
         "study": NAME, "case": case_key(approach, optimiser, metric, snr_db), "approach": approach,
         "optimiser": optimiser, "cost_function": metric, "snr_db": snr_db, "drive": "bridge", "engine": a.engine,
@@ -450,18 +569,67 @@ def frequency_peaks(snr_db: float | None = None, seed: int = 1) -> np.ndarray:
     seg = welch.segment(w["time_s"].size)
     bins = np.arange(int(math.ceil(F_MIN * seg / FS_FRF)), int(F_MAX * seg / FS_FRF) + 1)
     f, resp, _ = ap.responses_from_waveforms(w, FS_FRF, [ap.ZIN_SPEC["Zin"]], welch, bins)
-    return modal.response_peaks(bins * FS_FRF / seg, resp["Zin"], PEAK_PROMINENCE, PEAK_COUNT)
+    return modal.response_peaks(bins * FS_FRF / seg, resp["Zin"], PEAK_PROMINENCE, PEAK_COUNT,
+                                noise_factor=PEAK_NOISE_FACTOR)
 
 
-def resonance_proxy(a: ap.SimulatedFrequency, params: ParameterSet, snr_db: float | None = None, seed: int = 1
-                    ) -> modal.ResonanceProxy:
-    """First stage of the frequency path: :func:`analytic_proxy` plus the target's resonance frequencies
-    (:func:`frequency_peaks`) against the poles of the estimate's input impedance."""
-    f_t = frequency_peaks(snr_db, seed)
+def frequency_record_modes(snr_db: float | None = None, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Mode frequencies (Hz) of the frequency path's record (noisy as the target), from a subspace model.
+
+    The first :data:`SUBSPACE_SAMPLES_FRF` samples of the PRBS12 record, from the commanded
+    bridge voltage to ``v_in`` (:func:`modal.subspace_model`, as :func:`record_modes`):
+    the arrangement's modes, which a single Welch estimate no longer shows as peaks
+    once the noise dominates the current above about 100 kHz.
+    """
     circuit = get_model(NAME).circuit
-    engine = ap.InjectionEngine(circuit, PORT, np.zeros(2), FS_FRF)
+    w = cells.add_noise(td.simulate_pris(circuit, PORT, SOURCE_FRF, FS_FRF, periods=1), snr_db, _noise_seed(seed))
+    n = SUBSPACE_SAMPLES_FRF
+    A, b, c, _ = modal.subspace_model(w["v_bprbs"][:n], w["v_in"][:n], SUBSPACE_ORDER, SUBSPACE_ROWS)
+    poles, res = modal.discrete_modes(A, b, c, FS_FRF)
+    f, z, _ = _strongest_modes(poles, res, FS_FRF, F_MAX)
+    return f, z
+
+
+def bin_weights(snr_db: float | None, seed: int, bins: np.ndarray) -> np.ndarray:
+    """Weights of the compared bins: ``s0 / sqrt(s_k^2 + s0^2)``, ``s_k`` the local noise of the target's
+    ``log10 |Zin|`` (:func:`modal.local_noise` over every Welch bin), ``s0`` = :data:`BIN_NOISE_FLOOR` decades.
+
+    Noise-free data give weights of 1 (the thesis's unweighted cost); under noise the
+    noise-dominated bins count less (weighted least squares, the maximum-likelihood
+    form for independent Gaussian bin errors).
+    """
+    circuit = get_model(NAME).circuit
+    w = cells.add_noise(td.simulate_pris(circuit, PORT, SOURCE_FRF, FS_FRF, periods=1), snr_db, _noise_seed(seed))
+    welch = ap.WelchSettings()
+    seg = welch.segment(w["time_s"].size)
+    fine = np.arange(int(math.ceil(F_MIN * seg / FS_FRF)), int(F_MAX * seg / FS_FRF) + 1)
+    _, resp, _ = ap.responses_from_waveforms(w, FS_FRF, [ap.ZIN_SPEC["Zin"]], welch, fine)
+    sd = modal.local_noise(np.log10(np.maximum(np.abs(resp["Zin"]), 1e-300)))
+    s_k = np.interp(np.asarray(bins, float), fine.astype(float), sd)
+    return BIN_NOISE_FLOOR / np.sqrt(s_k ** 2 + BIN_NOISE_FLOOR ** 2)
+
+
+def resonance_proxy(a: ap.SimulatedFrequency, params: ParameterSet, snr_db: float | None = None, seed: int = 1,
+                    weights: np.ndarray | None = None) -> modal.ResonanceProxy:
+    """First stage of the frequency path: :func:`analytic_proxy` plus the target's resonance frequencies.
+
+    Noise-free: the peaks of the target's Welch ``Zin`` (:func:`frequency_peaks`) against
+    the poles of the estimate's input impedance. Under noise: the arrangement's modes
+    from the record (:func:`frequency_record_modes`) against the estimate's
+    arrangement modes, and the proxy's residuals weighted by ``weights``.
+    """
+    circuit = get_model(NAME).circuit
+    proxy: ap.Approach = analytic_proxy(a, params)
+    if snr_db is None:
+        f_t = frequency_peaks(snr_db, seed)
+        engine: Any = ap.InjectionEngine(circuit, PORT, np.zeros(2), FS_FRF)
+    else:
+        f_t, _ = frequency_record_modes(snr_db, seed)
+        engine = ap.PrisEngine(circuit, PORT, SOURCE_FRF, FS_FRF, 2, probes=[])
+        if weights is not None:
+            proxy = modal.Weighted(proxy, weights)
     guide = modal.ModalGuide(params, engine, f_t, np.ones_like(f_t), damping_weight=0.0)
-    return modal.ResonanceProxy(analytic_proxy(a, params), guide, PEAK_WEIGHT)
+    return modal.ResonanceProxy(proxy, guide, PEAK_WEIGHT)
 
 
 def _run_frequency_staged(a: ap.SimulatedFrequency, params: ParameterSet, optimiser: str, quick: bool, seed: int,
@@ -479,7 +647,9 @@ def _run_frequency_staged(a: ap.SimulatedFrequency, params: ParameterSet, optimi
     simulated path's residuals; the lowest simulated cost is kept.
     """
     fp = plan["frequency_proxy"]
-    proxy = resonance_proxy(a, params, snr_db, seed)
+    weights = bin_weights(snr_db, seed, a.bins) if snr_db is not None else None
+    proxy = resonance_proxy(a, params, snr_db, seed, weights)
+    fit: ap.Approach = a if weights is None else modal.Weighted(a, weights)
     found: list[tuple[float, np.ndarray]] = []
     nfev_proxy, trace, notes = 0, [], []
     for k in range(fp["restarts"]):
@@ -495,8 +665,9 @@ def _run_frequency_staged(a: ap.SimulatedFrequency, params: ParameterSet, optimi
             break
     best_x, best_c, nfev = starts[0][1], math.inf, 0
     for i, (c_proxy, x) in enumerate(starts):
-        pol = common.least_squares_polish(a, x, max_nfev=plan["polish_iterations"], max_time_s=plan["polish_time_s"])
-        c = float(a.cost_batch(np.asarray(pol["x"])[None])[0])
+        pol = common.least_squares_polish(fit, x, max_nfev=plan["polish_iterations"],
+                                          max_time_s=plan["polish_time_s"])
+        c = float(fit.cost_batch(np.asarray(pol["x"])[None])[0])
         nfev += int(pol["nfev"]) + 1
         trace.append([float(nfev_proxy + nfev), min(c, best_c)])
         notes.append(f"candidate {i + 1}: proxy cost {c_proxy:.3g}, simulated cost {c:.4g} ({pol['message']})")
@@ -688,3 +859,52 @@ def run(quick: bool = True, out: str | None = None, scheduler: str | None = None
     if progress:
         common.say(table)
     return summary
+
+
+# ====================================================================== Cramer-Rao bounds of the cells
+#: Noise draws of the Monte-Carlo that measures the noise of each compared Welch bin (frequency path).
+BOUND_DRAWS = 24
+
+
+def _log_zin(w: dict[str, np.ndarray], welch: ap.WelchSettings, bins: np.ndarray) -> np.ndarray:
+    _, resp, _ = ap.responses_from_waveforms(w, FS_FRF, [ap.ZIN_SPEC["Zin"]], welch, bins)
+    return np.log10(np.maximum(np.abs(resp["Zin"]), 1e-300))
+
+
+@functools.lru_cache(maxsize=16)
+def cached_bound(approach: str, snr_db: float) -> dict[str, Any]:
+    """:func:`cell_bound`, computed once per process (time, EMD and IEMD share one)."""
+    return cell_bound("time" if approach in ("emd", "iemd") else approach, snr_db)
+
+
+def cell_bound(approach: str, snr_db: float) -> dict[str, Any]:
+    """Cramer-Rao bound (relative one-sigma, %) of each parameter from the data ``approach`` compares at ``snr_db``.
+
+    Time, EMD and IEMD: the ``v_in`` record of :func:`time_target` with white noise
+    ``snr_db`` below its RMS (the bridge drive is known exactly, so the current's
+    noise carries no information). Frequency: ``log10 |Zin|`` at the compared bins,
+    each with the spread measured over :data:`BOUND_DRAWS` noise draws on voltage and
+    current (:func:`bounds.bin_spread`). See :mod:`estimation.studies.bounds`.
+    """
+    from . import bounds
+
+    params = make_params()
+    if approach == "frequency":
+        circuit = get_model(NAME).circuit
+        clean = td.simulate_pris(circuit, PORT, SOURCE_FRF, FS_FRF, periods=1)
+        a = build_approach("frequency", "rmse", params)
+        sd = bounds.bin_spread(clean, lambda w: _log_zin(w, a.welch, a.bins),
+                               lambda w, s: cells.add_noise(w, snr_db, s), BOUND_DRAWS)
+        sd = np.maximum(sd, 1e-12)
+        b = bounds.cramer_rao(a.residuals, params, TARGET, sd)
+        data = (f"log10|Zin| at the {a.bins.size} compared bins; per-bin spread over {BOUND_DRAWS} noise draws "
+                f"(median {np.median(sd):.3g}, max {np.max(sd):.3g} decades)")
+    elif approach in ("time", "emd", "iemd"):
+        w = time_target()
+        sigma = bounds.noise_sigma(w["v_in"], snr_db)
+        t = build_approach("time", "rmse", params)
+        b = bounds.cramer_rao(t.residuals, params, TARGET, sigma)
+        data = f"v_in, {w['v_in'].size} samples, white noise {sigma:.4g} V RMS"
+    else:
+        raise common.StudyError(f"three-section approach must be one of {', '.join(APPROACHES)} (got {approach!r})")
+    return {"approach": approach, "snr_db": float(snr_db), "bound_percent": b, "data": data}
