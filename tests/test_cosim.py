@@ -37,12 +37,14 @@ def runs(tmp_path_factory) -> dict[str, object]:
     return out
 
 
+@pytest.mark.slow
 def test_monolithic_fmu_is_the_exact_reference(runs):
     exact = td.simulate_pris(get_model("three-section").circuit, "n1", THREE, FS)
     err = cosim.coupling_error(runs["ref"], exact, ("v_in", "i_in", "v_n2"))
     assert max(err.values()) < 1e-9
 
 
+@pytest.mark.slow
 def test_gauss_seidel_coupling_error_is_bounded_and_first_order(runs):
     """Explicit coupling holds the exchanged signal over a communication step: a first-order error.
 
@@ -61,6 +63,7 @@ def test_gauss_seidel_coupling_error_is_bounded_and_first_order(runs):
     assert np.array_equal(runs["gauss-seidel", 1]["v_bprbs"], ref["v_bprbs"])
 
 
+@pytest.mark.slow
 def test_jacobi_coupling_error_is_reported_not_hidden(runs):
     """Jacobi delays both signals by a step: at one step per sample it is off by more than 100 %
     on v_in for this stiff terminal (a real limitation, measured here), and converges with sub-steps."""

@@ -90,6 +90,7 @@ def test_prior_penalty_is_the_log_normal_in_nats():
     assert design_prior(design, math.inf, 1e-4, f.size, 1) is None
 
 
+@pytest.mark.slow
 def test_cli_reads_tolerance_and_values_with_suffixes(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "pris_cosim", "diagnose", "--measured",
                            str(DATA / "within_tolerance.csv"), "--netlist", str(DATA / "design_cascade5.cir"),

@@ -67,6 +67,7 @@ def test_component_drift_named(seed):
     assert d.best.extra["c_scale"] == pytest.approx(case.truth["c_scale"], rel=0.01)
 
 
+@pytest.mark.slow
 def test_switch_ringing_named(ringing_diagnosis):
     case, d = ringing_diagnosis
     assert d.cause == "switch-ringing" and d.gain >= 0.5
@@ -77,6 +78,7 @@ def test_switch_ringing_named(ringing_diagnosis):
     assert rms["after"] < 0.3 * rms["before"]
 
 
+@pytest.mark.slow
 def test_switch_ringing_with_snubber_named():
     case = waveform_case("switch-ringing", 0, fs=10e6)  # seed 0 draws the thesis's snubber
     assert case.truth["snubber"] and case.diagnose_kwargs
@@ -87,6 +89,7 @@ def test_switch_ringing_with_snubber_named():
     assert d.evidence["localisation"]["where"] == "waveform edges and ringing"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed,fs", [(1, 2e6), (2, 2e6), (3, 10e6), (4, 1.2345e6)])
 def test_clean_data_is_none(seed, fs):
     case = waveform_case("none", seed, fs=fs)
@@ -96,6 +99,7 @@ def test_clean_data_is_none(seed, fs):
     assert d.as_json()["extended_cost"] == d.as_json()["baseline_cost"]
 
 
+@pytest.mark.slow
 def test_switching_between_samples():
     """fs not a multiple of f_clk: the bridge switches between samples; the bit clock recovers the instants.
 
@@ -138,6 +142,7 @@ def test_thesis_measured_values_name_series_resistance():
     assert by["series-resistance"]["gain"] > by["component-drift"]["gain"]
 
 
+@pytest.mark.slow
 def test_json_and_report(ringing_diagnosis, tmp_path):
     _, d = ringing_diagnosis
     js = d.as_json()

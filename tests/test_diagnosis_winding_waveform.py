@@ -48,6 +48,7 @@ def clean_record():
     return _record()
 
 
+@pytest.mark.slow
 @needs_ngspice
 def test_impedance_from_the_record_matches_the_winding(clean_record):
     """The record's H1 against the winding's impedance from a small nodal solve written here."""
@@ -80,6 +81,7 @@ def test_impedance_from_the_record_matches_the_winding(clean_record):
     assert net.has_element("Cs1")
 
 
+@pytest.mark.slow
 @needs_ngspice
 def test_clean_winding_record_gives_none(clean_record):
     d = diagnose_winding_waveforms(clean_record, model=get_model("three-section"), progress=False)

@@ -124,6 +124,7 @@ def _errors(out):
     return {k: abs(v) for k, v in out["errors_percent"].items()}
 
 
+@pytest.mark.slow
 def test_smallest_config_frequency_is_right_and_says_so():
     out = cli.run_estimate({"model": "two-section"}, progress=False)
     assert max(_errors(out).values()) < 1.0, out["errors_percent"]
@@ -132,6 +133,7 @@ def test_smallest_config_frequency_is_right_and_says_so():
     assert all(0 <= u < 0.01 for u in out["uncertainty"].values())
 
 
+@pytest.mark.slow
 def test_smallest_config_time_within_1pct():
     out = cli.run_estimate({"model": "two-section", "approach": "time", "duration": 0.05, "fs": 200e3},
                            progress=False)

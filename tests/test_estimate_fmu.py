@@ -86,6 +86,7 @@ def test_truth_scores_on_fmu_records_at_1mhz(name, fmu, port, case, duration):
     ("three-section", "n1", SourceSettings(vdc=100.0, prbs_order=6, fclk=100e3, rpris=150.0, lpris=4e-3,
                                            cpris=1e-6), 2e-9),
 ])
+@pytest.mark.slow
 def test_truth_scores_on_ngspice_records(name, port, settings, max_step, fs):
     from pris_cosim import timedomain as td
 
@@ -144,6 +145,7 @@ def _fmu_cfg(record: Path, **kw) -> dict:
     return cfg
 
 
+@pytest.mark.slow
 def test_fmu_estimate_recovers_and_resumes(tmp_path, two_record):
     out = tmp_path / "run"
     a = run_estimate(_fmu_cfg(two_record), progress=False, out=str(out), workers=2)
@@ -161,6 +163,7 @@ def test_fmu_estimate_recovers_and_resumes(tmp_path, two_record):
     assert (out / "runs" / "restart-2.json").is_file()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("approach", ["iemd", "emd", "frequency"])
 def test_fmu_estimate_other_approaches_with_a_current_input(tmp_path, approach):
     """The DUT FMU driven by the recorded current (linear input): time, EMD, IEMD and Welch H1."""
@@ -208,6 +211,7 @@ def test_fmi3_fmu_in_the_loop(tmp_path):
     ({"values": {"C2": 1e-9}}, "C2"),  # also tied
     ({"input_hold": "cubic"}, "input_hold"),
 ])
+@pytest.mark.slow
 def test_bad_fmu_config_one_line(tmp_path, two_record, change, needle):
     cfg = _fmu_cfg(two_record)
     cfg.update(change)

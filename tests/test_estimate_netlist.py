@@ -18,6 +18,7 @@ def _cfg(netlist_dir, **kw):
     return cfg
 
 
+@pytest.mark.slow
 def test_netlist_frequency_recovers_values(netlist_dir):
     out = run_estimate(_cfg(netlist_dir), progress=False)
     assert out["model"] == "two_section_table4_2"

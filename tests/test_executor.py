@@ -499,6 +499,7 @@ print(json.dumps(results))
 """
 
 
+@pytest.mark.slow
 def test_two_runs_on_one_directory_share_the_tasks(markers, tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), *sys.path])}
     procs = [subprocess.Popen([sys.executable, "-c", _SHARE, str(markers), str(tmp_path / "s")], env=env,

@@ -193,6 +193,7 @@ def test_invalid_parameters_are_rejected_with_a_message(fmus, values, words):
         assert np.all(np.isfinite(ok["v_in"]))
 
 
+@pytest.mark.slow
 def test_rebuilds_from_its_own_sources(fmus, tmp_path):
     src = fmus["three_arrangement"]
     unzip = tmp_path / "fmu"

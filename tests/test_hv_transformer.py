@@ -198,6 +198,7 @@ def test_study_on_measured_csv(tmp_path, capsys):
 
 
 # ---------------------------------------------------------------------- the lab command
+@pytest.mark.slow
 def test_lab_cli_noise_free_round_trip(tmp_path, capsys):
     out = tmp_path / "lab.csv"
     assert main(["lab", "--model", "hv-4section", "--quick", "--no-noise", "--configs", "LVOC,HVSC",

@@ -116,6 +116,7 @@ def _guidance_check(tmp_path: Path, folder: str, base: str, step_ns: int, bits: 
         assert cosim.relative_rms(lc[lc_name][k - 1::k], exact[name][1:]) < 0.01, name
 
 
+@pytest.mark.slow
 def test_libcosim_at_the_guidance_step_is_within_one_percent_two_section(tmp_path):
     """At the largest step that the coupling guidance gives for 1 % with a Jacobi master (two-section: 160 ns,
     50 PRBS bits), libcosim running the SSP export is within 1 % RMS of the exact co-simulation."""

@@ -153,6 +153,7 @@ def test_study_without_data_names_the_directory(tmp_path, monkeypatch):
 
 
 # ---------------------------------------------------------------------- the study
+@pytest.mark.slow
 def test_study_quick_writes_json_and_plots(tmp_path, monkeypatch):
     _need(SMALL)
     _need(ADMITTANCE)
@@ -171,6 +172,7 @@ def test_study_quick_writes_json_and_plots(tmp_path, monkeypatch):
         assert (out / name).stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_cli_study_real_data(tmp_path, monkeypatch, capsys):
     """``pris-cosim study real-data --json``: one JSON object; a missing data directory exits 2 with one line."""
     from pris_cosim.cli import main

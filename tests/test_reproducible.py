@@ -9,6 +9,8 @@ import subprocess
 import sys
 from typing import Any
 
+import pytest
+
 #: Keys whose values are wall times or derived from them (or name the output directory).
 _TIMING_KEYS = ("wall", "per_eval", "setup_s", "evals_per_s", "elapsed", "speedup", "table", "out")
 
@@ -41,6 +43,7 @@ def _study(tmp_path, workers: int) -> dict:
     return json.loads(proc.stdout)
 
 
+@pytest.mark.slow
 def test_quick_two_section_study_same_numbers_with_one_and_two_workers(tmp_path):
     one, two = _study(tmp_path, 1), _study(tmp_path, 2)
     assert [r["case"] for r in one["rows"]] == ["1", "4"]

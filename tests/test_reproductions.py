@@ -18,6 +18,7 @@ def alpha_study(tmp_path_factory):
     return rp.impedance_level_study(out_dir=out), out
 
 
+@pytest.mark.slow
 def test_similar_and_high_rlc_impedance_give_the_analytic_zin(alpha_study):
     res, _ = alpha_study
     for key in ("alpha=1000", "alpha=1e+06"):
@@ -25,6 +26,7 @@ def test_similar_and_high_rlc_impedance_give_the_analytic_zin(alpha_study):
         assert res[key]["points"] > 500
 
 
+@pytest.mark.slow
 def test_low_rlc_impedance_aliases(alpha_study):
     """Thesis Fig. 4.3/4.4: with alpha = 1 the current's fast edges are under-sampled and Zin is wrong."""
     res, out = alpha_study
@@ -32,6 +34,7 @@ def test_low_rlc_impedance_aliases(alpha_study):
     assert (out / "fig4_3-4_6_alpha_1.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_two_section_voltage_ratios(tmp_path):
     res = rp.two_section_responses(out_dir=tmp_path)
     for name in ("Zin", "R1in", "R2in"):

@@ -177,6 +177,7 @@ def _bad_files(tmp: Path) -> dict[str, Path]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["truncated", "one-port", "non-increasing", "garbage"])
 @pytest.mark.parametrize("role", ["--measured", "--reference"])
 def test_bad_files_give_one_line_errors(tmp_path, which, role):

@@ -96,6 +96,7 @@ def test_resume_runs_only_missing_ids(tmp_path):
     assert sorted(ResultsStore(out).ids()) == ["demo-seed1", "demo-seed3"]
 
 
+@pytest.mark.slow
 def test_tiny_study_on_a_local_dask_cluster(tmp_path):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
@@ -109,6 +110,7 @@ def test_tiny_study_on_a_local_dask_cluster(tmp_path):
     assert len(stored) == 2
 
 
+@pytest.mark.slow
 def test_estimate_command_from_a_config(tmp_path):
     cfg = {"model": "two-section",
            "parameters": {"R1": {"min": 1, "max": 100}, "C1": {}, "L1": {}, "L2": {}},

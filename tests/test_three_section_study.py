@@ -80,6 +80,7 @@ def test_convergence_trace_is_the_running_best():
     assert [p[1] for p in tr] == sorted((p[1] for p in tr), reverse=True)
 
 
+@pytest.mark.slow
 def test_tiny_study_with_seeds_and_noise_writes_rows_and_figures(tmp_path, monkeypatch):
     def tiny(approach, optimiser, quick):
         glob = {"swarm_size": 8, "max_iter": 2} if optimiser == "pso" else {"restarts": 0, "popsize": 8, "max_iter": 2}

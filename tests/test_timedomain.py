@@ -128,6 +128,7 @@ def test_current_injection_of_the_pris_current_reproduces_the_voltage_approximat
     assert errors[0] < 0.2
 
 
+@pytest.mark.slow
 @needs_ngspice
 def test_three_section_matches_ngspice():
     """PRBS4 at 100 kHz, two periods, 10 MHz sampling; ngspice at 2 ns maximum step from zero state."""
@@ -139,6 +140,7 @@ def test_three_section_matches_ngspice():
         assert rel_rms(w[name], ref[name]) < 2e-3, name
 
 
+@pytest.mark.slow
 @needs_ngspice
 def test_two_section_matches_ngspice():
     """Thesis 4.1.2 source (30 V, 10 kHz, 31.8 kOhm, 2.53 H, 10 nF), PRBS3, 1 MHz sampling, 2 ns step."""

@@ -92,6 +92,7 @@ def test_steady_state_start_is_periodic(model):
         assert np.max(np.abs(x[:half] - x[half:])) <= 1e-8 * np.max(np.abs(x))
 
 
+@pytest.mark.slow
 def test_round_trip_noise_free_recovers_the_analytic_responses(model, clean):
     assert clean.measured.names == SIX
     f = clean.measured.frequency_hz
@@ -103,6 +104,7 @@ def test_round_trip_noise_free_recovers_the_analytic_responses(model, clean):
         assert deg < MAX_DEG, (name, deg)
 
 
+@pytest.mark.slow
 def test_noise_makes_data_above_20khz_noisier(model, clean, noisy):
     """The thesis saw noise above 20 kHz: the PRBS spectrum has its first null at f_clk = 20 kHz."""
     f = noisy.measured.frequency_hz
@@ -137,6 +139,7 @@ def test_noise_free_option_differs_from_noisy_and_seed_is_reproducible(model):
     assert sum(a.clipped.values()) == 0
 
 
+@pytest.mark.slow
 def test_csv_round_trip(tmp_path, noisy):
     path = tmp_path / "lab.csv"
     vl.write_lab_csv(path, noisy.measured)
@@ -150,6 +153,7 @@ def test_csv_round_trip(tmp_path, noisy):
     assert not list(tmp_path.glob(".*.tmp"))
 
 
+@pytest.mark.slow
 def test_two_clock_synthesis_uses_low_clock_below_transition(noisy):
     st = noisy.settings
     for name in SIX:
@@ -167,6 +171,7 @@ def test_two_clock_synthesis_uses_low_clock_below_transition(noisy):
         assert lo.frequency_hz[0] < hi.frequency_hz[0]
 
 
+@pytest.mark.slow
 def test_plots(tmp_path, model, noisy):
     paths = vl.plot_lab(noisy, model, tmp_path)
     paths += vl.plot_record(noisy.records[("LVHV", "high")], tmp_path)
