@@ -29,12 +29,12 @@ from .models import Model
 from .units import parse_value
 
 
-def _si(text: str) -> float:
-    """A number with an optional SI suffix (``4m``, ``10n``, ``31.8k``) for argparse."""
+def si_value(text: str) -> float:
+    """A number with an optional SPICE scale suffix (``4m``, ``10n``, ``31.8k``) for argparse; every command reads values so."""
     try:
         return parse_value(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"cannot parse value {text!r}") from None
+        raise argparse.ArgumentTypeError(f"cannot parse value {text!r} (a number such as 4m, 1u or 1e-6)") from None
 
 
 def register(sub: Any) -> None:
@@ -43,7 +43,7 @@ def register(sub: Any) -> None:
     add_circuit_options(p)
     _config_option(p)
     _source_options(p, required=True)
-    p.add_argument("--fs", type=_si, required=True, help="sampling frequency, Hz")
+    p.add_argument("--fs", type=si_value, required=True, help="sampling frequency, Hz")
     p.add_argument("--periods", type=int, required=True, help="number of PRBS periods")
     p.add_argument("--out", required=True, metavar="FILE", help="waveform file to write; format by extension: "
                    ".csv, .npz (NumPy) or .mat (MATLAB v5), the same columns in each")
@@ -82,13 +82,13 @@ def _source_options(p: argparse.ArgumentParser, required: bool) -> None:
     for flag, dest, unit, value in (("--vdc", "vdc", "V", d.vdc), ("--fclk", "fclk", "Hz", d.fclk),
                                     ("--rpris", "rpris", "Ohm", d.rpris), ("--lpris", "lpris", "H", d.lpris),
                                     ("--cpris", "cpris", "F", d.cpris)):
-        p.add_argument(flag, dest=dest, type=_si, required=required, default=None,
+        p.add_argument(flag, dest=dest, type=si_value, required=required, default=None,
                        help=f"PRIS source {dest}, {unit}" + ("" if required else f" (default {default.format(value)})"))
     p.add_argument("--prbs-order", dest="prbs_order", type=int, required=required, default=None,
                    help="LFSR order of the PRBS" + ("" if required else f" (default {default.format(d.prbs_order)})"))
     for flag, dest, unit in (("--rsnub", "rsnub", "Ohm"), ("--csnub", "csnub", "F"), ("--lsw", "lsw", "H"),
                              ("--csw", "csw", "F")):
-        p.add_argument(flag, dest=dest, type=_si, default=None,
+        p.add_argument(flag, dest=dest, type=si_value, default=None,
                        help=f"optional source {dest}, {unit} (default {'the thesis case, else ' if not required else ''}0)")
 
 

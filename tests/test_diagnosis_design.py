@@ -99,7 +99,8 @@ def test_cli_reads_tolerance_and_values_with_suffixes(tmp_path):
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert out["cause"] == "none" and out["drift"] == [] and out["tolerance"] == 0.2
-    from estimation.diagnosis.cli import _tolerance, _value
+    from estimation.diagnosis.cli import _tolerance
+    from pris_cosim.cli_sim import si_value as _value
 
     assert _value("4m") == pytest.approx(4e-3) and _value("1u") == pytest.approx(1e-6) and _value("1e-6") == 1e-6
     assert math.isinf(_tolerance("inf")) and _tolerance("20%") == pytest.approx(0.2)

@@ -7,6 +7,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from pris_cosim.cli_sim import si_value
+
 from .prior import DEFAULT_TOLERANCE
 
 
@@ -23,10 +25,10 @@ def register(subparsers: Any) -> None:
                    help="how far the netlist's or model's values (the design) may be from the truth, relative "
                    f"(default {DEFAULT_TOLERANCE:g}: a log-normal prior of that width on every value; values moved "
                    "beyond it are reported as drift; 'inf' leaves the values free)")
-    p.add_argument("--rpris", type=_value, help="nominal source resistance, Ohm (waveform data; 150, 4.7k ...)")
-    p.add_argument("--lpris", type=_value, help="nominal source inductance, H (waveform data; 4m, 0.004 ...)")
-    p.add_argument("--cpris", type=_value, help="nominal source capacitance, F (waveform data; 1u, 1e-6 ...)")
-    p.add_argument("--rload", type=_value, help="load resistance if known, Ohm (waveform data)")
+    p.add_argument("--rpris", type=si_value, help="nominal source resistance, Ohm (waveform data; 150, 4.7k ...)")
+    p.add_argument("--lpris", type=si_value, help="nominal source inductance, H (waveform data; 4m, 0.004 ...)")
+    p.add_argument("--cpris", type=si_value, help="nominal source capacitance, F (waveform data; 1u, 1e-6 ...)")
+    p.add_argument("--rload", type=si_value, help="load resistance if known, Ohm (waveform data)")
     p.add_argument("--report", metavar="DIR", help="write report.md with plots into DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     sf = p.add_argument_group("SFRA (two-port Touchstone sweeps against a healthy fingerprint)")
@@ -41,23 +43,13 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=cmd_diagnose)
 
 
-def _value(text: str) -> float:
-    """A value as every command reads it: a number with an optional SPICE scale suffix (``4m``, ``1u``, ``1e-6``)."""
-    from pris_cosim.units import parse_value
-
-    try:
-        return parse_value(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"cannot parse value {text!r} (a number such as 4m, 1u or 1e-6)") from None
-
-
 def _tolerance(text: str) -> float:
     """``--tolerance``: a positive relative value (``0.2``, ``20%``) or ``inf``."""
     t = text.strip().lower()
     if t in ("inf", "infinity", "none", "free"):
         return float("inf")
     try:
-        v = float(t[:-1]) / 100 if t.endswith("%") else _value(t)
+        v = float(t[:-1]) / 100 if t.endswith("%") else si_value(t)
     except (ValueError, argparse.ArgumentTypeError):
         raise argparse.ArgumentTypeError(f"--tolerance must be a positive number or inf, got {text!r}") from None
     if not v > 0:
