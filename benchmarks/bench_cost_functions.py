@@ -1,12 +1,12 @@
 """Cost-function benchmark of the three-section study: every cell over seeds and noise levels.
 
-Run: ``python benchmarks/bench_cost_functions.py [--seeds 3] [--snr-db 60,40,20]
+Run: ``python benchmarks/bench_cost_functions.py [--seeds 3] [--snr-db [none,]60,40,20]
 [--optimisers ga,pso,cma] [--approaches frequency,time,emd,iemd] [--full] [--out DIR]``
 
 Every approach (frequency, time, EMD, IEMD) x optimiser (GA, PSO, CMA-ES;
 each followed by the local solver, RMSE-type costs then by a least-squares
-polish) x cost function (RMSE-type, correlation) x noise level (noise-free
-and each ``--snr-db``) is run from ``--seeds`` seeds with the quick budgets
+polish) x cost function (RMSE-type, correlation) x noise level (each
+``--snr-db``; ``none`` in the list adds the noise-free cells) is run from ``--seeds`` seeds with the quick budgets
 of ``pris-cosim study three-section --quick`` (``--full``: the full ones).
 
 Writes into ``--out`` (default ``bench-cost-functions``):
@@ -64,6 +64,13 @@ def _g(x: Any, fmt: str = ".3g") -> str:
     return "-" if x is None or not isinstance(x, (int, float)) or not math.isfinite(x) else format(x, fmt)
 
 
+def _failures(r: dict[str, Any]) -> str:
+    """Missed seeds by kind: ``cost`` (the cost is no higher at the estimate than at the truth: its minimum
+    lies beyond the limit) / ``search`` (a lower valley was not found)."""
+    f = r.get("failures") or {}
+    return "-" if not f else f"{f.get('cost', 0)}/{f.get('search', 0)}"
+
+
 def csv_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     out = []
     for r in rows:
@@ -75,12 +82,15 @@ def csv_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "success_rate_5pct": round(r.get("success_rate_5pct", r["success_rate"]), 3),
                 "worst_abs_error_percent_median": round(r["abs_error_percent_max_median"], 3),
                 "efficiency_median": _num(r.get("efficiency_median")),
-                "efficiency_max": _num(r.get("efficiency_max"))}
+                "efficiency_max": _num(r.get("efficiency_max")),
+                "misses_cost": (r.get("failures") or {}).get("cost", 0),
+                "misses_search": (r.get("failures") or {}).get("search", 0)}
         line.update({f"median_error_percent_{k}": round(med[k], 3) for k in three.NAMES})
         line.update({f"bound_percent_{k}": _num(bound.get(k), 4) for k in three.NAMES})
         line.update({f"efficiency_{k}": _num(eff.get(k)) for k in three.NAMES})
         line.update({"evaluations_median": r["evaluations"], "evals_per_s": round(r["evals_per_s"], 1),
                      "wall_s_median": round(r["wall_s"], 2), "wall_s_total": round(r["wall_s_total"], 2),
+                     "cpu_s_total": round(r.get("cpu_s_total", 0.0), 2),
                      "non_identifiable": " ".join(r.get("non_identifiable", []))})
         out.append(line)
     return out
@@ -123,8 +133,8 @@ def markdown(rows: list[dict[str, Any]], seeds: int, wall: float) -> str:
     for lv in levels:
         lines += ["", f"## {lv}", "",
                   "| approach | optimiser | cost | success | within 5 % | " + " | ".join(three.NAMES)
-                  + " | eff. median | eff. max | evaluations | evals/s | wall s |",
-                  "|---|---|---|---|---|" + "---|" * len(three.NAMES) + "---|---|---|---|---|"]
+                  + " | eff. median | eff. max | misses (cost/search) | evaluations | evals/s | wall s |",
+                  "|---|---|---|---|---|" + "---|" * len(three.NAMES) + "---|---|---|---|---|---|"]
         bound_rows = {}
         for r in rows:
             if _level(r) != lv:
@@ -134,7 +144,7 @@ def markdown(rows: list[dict[str, Any]], seeds: int, wall: float) -> str:
                          f"{r.get('success_rate_5pct', r['success_rate']):.0%} | "
                          + " | ".join(f"{med[k]:.3g}" for k in three.NAMES)
                          + f" | {_g(r.get('efficiency_median'))} | {_g(r.get('efficiency_max'))}"
-                         + f" | {r['evaluations']} | {r['evals_per_s']:.0f} | {r['wall_s']:.1f} |")
+                         + f" | {_failures(r)} | {r['evaluations']} | {r['evals_per_s']:.0f} | {r['wall_s']:.1f} |")
             if r.get("bound_percent"):
                 kind = "frequency" if r["approach"] == "frequency" else "time, EMD, IEMD"
                 bound_rows[kind] = r["bound_percent"]
@@ -153,7 +163,8 @@ def json_tables(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     cols = (["approach", "optimiser", "cost", "noise", "seeds", "success rate", "success rate within 5 %",
              "worst median |error| (%)", "median efficiency", "max efficiency"]
             + [f"median error {k} (%)" for k in three.NAMES] + [f"bound {k} (%)" for k in three.NAMES]
-            + [f"efficiency {k}" for k in three.NAMES] + ["evaluations (median)", "wall median (s)"])
+            + [f"efficiency {k}" for k in three.NAMES]
+            + ["misses (cost/search)", "evaluations (median)", "wall median (s)", "processor time (s)"])
     out = []
     for r in rows:
         b, e, med = r.get("bound_percent") or {}, r.get("efficiency") or {}, r["errors_percent_median"]
@@ -162,7 +173,8 @@ def json_tables(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                     round(r["abs_error_percent_max_median"], 3), _num(r.get("efficiency_median")),
                     _num(r.get("efficiency_max"))]
                    + [round(med[k], 3) for k in three.NAMES] + [_num(b.get(k), 4) for k in three.NAMES]
-                   + [_num(e.get(k)) for k in three.NAMES] + [r["evaluations"], round(r["wall_s"], 2)])
+                   + [_num(e.get(k)) for k in three.NAMES]
+                   + [_failures(r), r["evaluations"], round(r["wall_s"], 2), round(r.get("cpu_s_total", 0.0), 1)])
     return [table("Three-section cost-function cells (success: every parameter within max(5 %, 3 x bound))",
                   cols, out)]
 
@@ -170,7 +182,8 @@ def json_tables(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, default=3)
-    p.add_argument("--snr-db", default="60,40,20")
+    p.add_argument("--snr-db", default="60,40,20",
+                   help="noise levels, dB; 'none' adds the noise-free cells (e.g. none,60,40,20)")
     p.add_argument("--optimisers", default=",".join(three.OPTIMISERS))
     p.add_argument("--approaches", default=",".join(three.APPROACHES))
     p.add_argument("--metrics", default=",".join(three.METRICS))
@@ -181,12 +194,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--merge", nargs="*", default=[], metavar="DIR",
                    help="also tabulate the rows of earlier runs (their study.json), e.g. other approaches")
     args = p.parse_args(argv)
-    levels = [float(x) for x in args.snr_db.split(",") if x.strip()]
+    items = [x.strip().lower() for x in args.snr_db.split(",") if x.strip()]
+    try:
+        levels = [float(x) for x in items if x not in ("none", "clean")]
+    except ValueError:
+        p.error(f"--snr-db takes SNRs in dB and 'none' for the noise-free cells (got {args.snr_db!r})")
     t0 = time.perf_counter()
     summary = three.run(quick=not args.full, out=args.out, workers=args.workers, seeds=args.seeds,
                         snr_db=levels, optimisers=[o for o in args.optimisers.split(",") if o],
                         approaches=[a for a in args.approaches.split(",") if a],
-                        metrics=[m for m in args.metrics.split(",") if m], search=False, progress=True)
+                        metrics=[m for m in args.metrics.split(",") if m], search=False, progress=True,
+                        noise_free=any(x in ("none", "clean") for x in items))
     wall = time.perf_counter() - t0
     rows = list(summary["rows"])
     for d in args.merge:

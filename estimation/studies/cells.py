@@ -108,7 +108,10 @@ def aggregate(runs: Sequence[Mapping[str, Any]], key: Callable[[Mapping[str, Any
     ``evals_per_s`` (all evaluations over all wall time), ``wall_s`` (median)
     and ``wall_s_total``; with a Cramer-Rao bound on the runs (``bound_percent``)
     also ``efficiency`` (median ``|error|`` over seeds / bound, per parameter),
-    ``efficiency_median`` and ``efficiency_max`` (over the parameters).
+    ``efficiency_median`` and ``efficiency_max`` (over the parameters);
+    ``failures`` counts the missed seeds by kind (``"cost"``: the approach's
+    cost is no higher at the estimate than at the truth; ``"search"``: it is
+    higher) and ``cpu_s_total`` sums the runs' processor time.
     """
     cells: dict[Any, list[Mapping[str, Any]]] = {}
     for r in runs:
@@ -133,6 +136,9 @@ def aggregate(runs: Sequence[Mapping[str, Any]], key: Callable[[Mapping[str, Any
             "wall_s": float(np.median(walls)),
             "wall_s_total": float(walls.sum()),
             "cost_median": float(np.median([r["cost"] for r in group])),
+            "failures": {kind: sum(r.get("failure") == kind for r in group) for kind in ("cost", "search")
+                         if any(r.get("failure") == kind for r in group)},
+            "cpu_s_total": float(sum(r.get("cpu_s", 0.0) for r in group)),
             "traces": [r.get("trace", []) for r in group],
         })
         row.pop("trace", None)

@@ -418,6 +418,40 @@ class Weighted(ap.Approach):
         return np.sum(np.where(np.isfinite(r), r, 10.0) ** 2, axis=1)
 
 
+class Shifted(ap.Approach):
+    """An approach's residuals plus a fixed offset (the output space-mapping correction of a proxy).
+
+    A cheap proxy (the analytic ``Zin``) and the fine model it stands for (the
+    simulated Welch estimate) differ by a smooth, slowly varying term: the
+    window's smoothing of the resonances. Adding the difference measured at
+    one point, ``r_fine(x_c) - r_proxy(x_c)``, makes the proxy agree with the
+    fine model there and close to it nearby (Bandler et al., "Space mapping:
+    the state of the art", IEEE Trans. MTT 52(1), 2004).
+
+    Parameters
+    ----------
+    inner : Approach
+        Approach with ``_residuals`` of shape ``(P, F)``.
+    offset : numpy.ndarray
+        ``(F,)`` added to every row of the residuals.
+    """
+
+    name = "shifted"
+    engine = "shifted"
+
+    def __init__(self, inner: ap.Approach, offset: np.ndarray):
+        super().__init__(inner.params)
+        self.inner = inner
+        self.offset = np.asarray(offset, float)
+
+    def _residuals(self, ev: Any) -> np.ndarray:
+        return self.inner._residuals(ev) + self.offset[None, :]
+
+    def _costs(self, ev: Any) -> np.ndarray:
+        r = self._residuals(ev)
+        return np.sum(np.where(np.isfinite(r), r, 10.0) ** 2, axis=1)
+
+
 class Box:
     """A box ``[x0 - h, x0 + h]`` (clipped to the unit cube) mapped onto the unit cube, for a local refinement.
 

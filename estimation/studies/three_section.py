@@ -96,7 +96,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -149,6 +149,8 @@ MODE_HEIGHT_RATIO = 0.1
 SUBSPACE_SAMPLES_FRF = 25_000
 #: Noise floor of the frequency path's bin weights, decades of log10 |Zin|.
 BIN_NOISE_FLOOR = 1e-3
+# maximum-likelihood bin weights (parametric bootstrap at the estimate): draws, floor (decades)
+ML_WEIGHT_DRAWS, ML_WEIGHT_FLOOR = 16, 1e-6
 #: Weights of the log damping-ratio and log residue residuals of the modal stage (frequencies: 1).
 MODAL_DAMPING_WEIGHT, MODAL_RESIDUE_WEIGHT = 0.01, 0.03
 #: Half-width (unit-cube units) of the box around the voltage fit in which the local solver refines the
@@ -201,11 +203,20 @@ def _noise_seed(seed: int) -> int:
     return 10_007 + int(seed)
 
 
+@functools.lru_cache(maxsize=8)
+def _frequency_record(snr_db: float | None, seed: int) -> dict[str, np.ndarray]:
+    """The frequency path's record: one simulated PRBS12 period with the cell's noise (cached; do not modify)."""
+    w = cells.add_noise(td.simulate_pris(get_model(NAME).circuit, PORT, SOURCE_FRF, FS_FRF, periods=1), snr_db,
+                        _noise_seed(seed))
+    for v in w.values():
+        v.setflags(write=False)
+    return w
+
+
 def frequency_target(snr_db: float | None = None, seed: int = 1
                      ) -> tuple[dict[str, np.ndarray], np.ndarray, int, ap.WelchSettings, np.ndarray]:
     """Target Zin from one simulated PRBS12 period (noise on ``v_in`` and ``i_in``), Welch H1 as the thesis."""
-    circuit = get_model(NAME).circuit
-    w = cells.add_noise(td.simulate_pris(circuit, PORT, SOURCE_FRF, FS_FRF, periods=1), snr_db, _noise_seed(seed))
+    w = _frequency_record(snr_db, seed)
     n = w["time_s"].size
     welch = ap.WelchSettings()
     bins, f = ap.bin_frequencies(FS_FRF, welch.segment(n), F_MIN, F_MAX, N_POINTS)
@@ -336,7 +347,8 @@ def optimiser_settings(approach: str, optimiser: str, quick: bool) -> dict[str, 
                       "own_local_evals": (60 if approach == "emd" else 2000) if quick else
                                          (1000 if approach == "emd" else 10000)},
             "frequency_proxy": {"restarts": 8 if quick else 16, "budget": Budget(max_evals=10000 if quick else 20000),
-                                "candidates": 2 if quick else 4}}
+                                "candidates": 1 if quick else 4, "mapping_rounds": 2 if quick else 4,
+                                "mapping_restarts": 3 if quick else 8}}
 
 
 def run_one(approach: str, optimiser: str, metric: str, quick: bool = True, seed: int = 1,
@@ -350,7 +362,9 @@ def run_one(approach: str, optimiser: str, metric: str, quick: bool = True, seed
     """
     from . import bounds
 
+    cpu0 = time.process_time()
     row = _run_one(approach, optimiser, metric, quick, seed, snr_db, drive)
+    row["cpu_s"] = time.process_time() - cpu0
     row["success_5pct"] = cells.success(row["errors_percent"])
     if snr_db is not None:
         cb = cached_bound(approach, float(snr_db))
@@ -359,7 +373,16 @@ def run_one(approach: str, optimiser: str, metric: str, quick: bool = True, seed
         row["limit_percent"] = {k: bounds.limit_percent(row["bound_percent"], k) for k in NAMES}
         row["success"] = bounds.within(row["errors_percent"], row["bound_percent"])
         row["success_rate"] = float(row["success"])
+    if not row["success"]:
+        row["failure"] = failure_kind(row["cost"], row["cost_at_target"])
     return row
+
+
+def failure_kind(cost: float, cost_at_truth: float) -> str:
+    """Why a run missed: ``"cost"`` when the approach's own cost is no higher at its estimate than at the
+    truth (the cost's minimum lies beyond the limit: no search can do better with that cost and that
+    record), ``"search"`` otherwise (a lower valley, the truth's, was not found)."""
+    return "cost" if float(cost) <= float(cost_at_truth) * (1 + 1e-9) else "search"
 
 
 def _run_one(approach: str, optimiser: str, metric: str, quick: bool = True, seed: int = 1,
@@ -563,8 +586,7 @@ def frequency_peaks(snr_db: float | None = None, seed: int = 1) -> np.ndarray:
     The Welch bins are 49 Hz apart (parabolic refinement between them); the peaks
     agree with the analytic ``Zin``'s to 1e-4..5e-4 (the 200 compared bins are 3 % apart).
     """
-    circuit = get_model(NAME).circuit
-    w = cells.add_noise(td.simulate_pris(circuit, PORT, SOURCE_FRF, FS_FRF, periods=1), snr_db, _noise_seed(seed))
+    w = _frequency_record(snr_db, seed)
     welch = ap.WelchSettings()
     seg = welch.segment(w["time_s"].size)
     bins = np.arange(int(math.ceil(F_MIN * seg / FS_FRF)), int(F_MAX * seg / FS_FRF) + 1)
@@ -581,8 +603,7 @@ def frequency_record_modes(snr_db: float | None = None, seed: int = 1) -> tuple[
     the arrangement's modes, which a single Welch estimate no longer shows as peaks
     once the noise dominates the current above about 100 kHz.
     """
-    circuit = get_model(NAME).circuit
-    w = cells.add_noise(td.simulate_pris(circuit, PORT, SOURCE_FRF, FS_FRF, periods=1), snr_db, _noise_seed(seed))
+    w = _frequency_record(snr_db, seed)
     n = SUBSPACE_SAMPLES_FRF
     A, b, c, _ = modal.subspace_model(w["v_bprbs"][:n], w["v_in"][:n], SUBSPACE_ORDER, SUBSPACE_ROWS)
     poles, res = modal.discrete_modes(A, b, c, FS_FRF)
@@ -598,8 +619,7 @@ def bin_weights(snr_db: float | None, seed: int, bins: np.ndarray) -> np.ndarray
     noise-dominated bins count less (weighted least squares, the maximum-likelihood
     form for independent Gaussian bin errors).
     """
-    circuit = get_model(NAME).circuit
-    w = cells.add_noise(td.simulate_pris(circuit, PORT, SOURCE_FRF, FS_FRF, periods=1), snr_db, _noise_seed(seed))
+    w = _frequency_record(snr_db, seed)
     welch = ap.WelchSettings()
     seg = welch.segment(w["time_s"].size)
     fine = np.arange(int(math.ceil(F_MIN * seg / FS_FRF)), int(F_MAX * seg / FS_FRF) + 1)
@@ -609,17 +629,78 @@ def bin_weights(snr_db: float | None, seed: int, bins: np.ndarray) -> np.ndarray
     return BIN_NOISE_FLOOR / np.sqrt(s_k ** 2 + BIN_NOISE_FLOOR ** 2)
 
 
+def ml_bin_weights(a: ap.SimulatedFrequency, params: ParameterSet, x: np.ndarray, record: Mapping[str, np.ndarray],
+                   draws: int = ML_WEIGHT_DRAWS, floor: float = ML_WEIGHT_FLOOR
+                   ) -> tuple[np.ndarray, np.ndarray, str]:
+    """Maximum-likelihood bin weights ``1 / s_k`` from a parametric bootstrap at the estimate ``x``.
+
+    The noise of the record is read off the data: the RMS of the voltage and
+    current left once the estimate's simulated waveforms are subtracted. The
+    estimate's waveforms with ``draws`` draws of white noise of those RMS values
+    give the spread ``s_k`` of ``log10 |Zin|`` at each compared bin (the
+    construction of the Cramer-Rao bound, :func:`cell_bound`, at the estimate
+    instead of the truth). Weights ``1 / sqrt(s_k^2 + floor^2)``, scaled to a
+    median of 1.
+
+    The same draws give the noise's bias of each bin, ``mean(log10 |Zin|
+    noisy) - log10 |Zin| clean``: the H1 estimate is biased low where the
+    current's noise is comparable to the current (an errors-in-variables
+    effect), and the log of a noisy magnitude is biased too. The fit subtracts
+    it from the target's residuals (bootstrap bias correction).
+
+    Returns
+    -------
+    weights : numpy.ndarray
+        ``(F,)``.
+    bias : numpy.ndarray
+        ``(F,)`` decades.
+    note : str
+        The noise read off the record.
+    """
+    from . import bounds
+
+    ev = params.evaluate(np.asarray(x, float)[None])
+    sim = a.sim.simulate(ev.overrides)
+    model = {k: np.asarray(v)[0] if np.ndim(v) == 2 else np.asarray(v) for k, v in sim.items()}
+    model["time_s"] = np.asarray(record["time_s"])
+    sig = {k: float(np.std(np.asarray(record[k]) - model[k])) for k in ("v_in", "i_in")}
+
+    def noisy(w: Mapping[str, np.ndarray], seed: int) -> dict[str, np.ndarray]:
+        rng = np.random.default_rng(seed)
+        out = dict(w)
+        for k, sd in sig.items():
+            out[k] = np.asarray(w[k]) + rng.normal(0.0, sd, np.shape(w[k]))
+        return out
+
+    def response(w: Mapping[str, np.ndarray]) -> np.ndarray:
+        return _log_zin(w, a.welch, a.bins)
+
+    draws_v = np.array([response(noisy(model, 90_001 + d)) for d in range(draws)])
+    spread = np.std(draws_v, axis=0, ddof=1)
+    bias = np.mean(draws_v, axis=0) - response(model)
+    wts = 1.0 / np.sqrt(spread ** 2 + floor ** 2)
+    wts = wts / float(np.median(wts))
+    note = (f"noise read off the record: {sig['v_in']:.3g} V, {sig['i_in']:.3g} A RMS; per-bin spread over {draws} "
+            f"draws median {np.median(spread):.3g}, max {np.max(spread):.3g} decades; bias median "
+            f"{np.median(bias):.2g}, largest {bias[np.argmax(np.abs(bias))]:.2g} decades")
+    return wts, bias, note
+
+
 def resonance_proxy(a: ap.SimulatedFrequency, params: ParameterSet, snr_db: float | None = None, seed: int = 1,
-                    weights: np.ndarray | None = None) -> modal.ResonanceProxy:
+                    weights: np.ndarray | None = None, offset: np.ndarray | None = None) -> modal.ResonanceProxy:
     """First stage of the frequency path: :func:`analytic_proxy` plus the target's resonance frequencies.
 
     Noise-free: the peaks of the target's Welch ``Zin`` (:func:`frequency_peaks`) against
     the poles of the estimate's input impedance. Under noise: the arrangement's modes
     from the record (:func:`frequency_record_modes`) against the estimate's
     arrangement modes, and the proxy's residuals weighted by ``weights``.
+    ``offset`` (log10 magnitudes per bin) is added to the analytic residuals
+    before the weights: the space-mapping correction of :func:`_run_frequency_staged`.
     """
     circuit = get_model(NAME).circuit
     proxy: ap.Approach = analytic_proxy(a, params)
+    if offset is not None:
+        proxy = modal.Shifted(proxy, offset)
     if snr_db is None:
         f_t = frequency_peaks(snr_db, seed)
         engine: Any = ap.InjectionEngine(circuit, PORT, np.zeros(2), FS_FRF)
@@ -673,12 +754,65 @@ def _run_frequency_staged(a: ap.SimulatedFrequency, params: ParameterSet, optimi
         notes.append(f"candidate {i + 1}: proxy cost {c_proxy:.3g}, simulated cost {c:.4g} ({pol['message']})")
         if c < best_c:
             best_x, best_c = np.asarray(pol["x"]), c
+    analytic = analytic_proxy(a, params)
+
+    def space_mapping(fine: ap.Approach, fit: ap.Approach, w: np.ndarray | None, x: np.ndarray, c_x: float,
+                      tag: str) -> tuple[np.ndarray, float, int]:
+        """Output space mapping: the proxy corrected by its difference from the simulated path at ``x``."""
+        nonlocal nfev, nfev_proxy
+        done = 0
+        for rnd in range(fp.get("mapping_rounds", 0)):
+            ev = params.evaluate(x[None])
+            offset = fine._residuals(ev)[0] - analytic._residuals(ev)[0]
+            nfev += 1
+            if not np.all(np.isfinite(offset)):
+                break
+            mapped = resonance_proxy(a, params, snr_db, seed, w, offset)
+            found_m: list[tuple[float, np.ndarray]] = []
+            for k in range(fp.get("mapping_restarts", fp["restarts"])):
+                r1, _ = common.optimise(mapped, plan["method"], 1000 * seed + 100 * (rnd + 1) + k, fp["budget"],
+                                        plan["modal"]["options"])
+                nfev_proxy += int(r1.nfev)
+                found_m.append((float(r1.fun), np.asarray(r1.x)))
+            c_m, x_m = min(found_m, key=lambda q: q[0])
+            pol = common.least_squares_polish(fit, x_m, max_nfev=plan["polish_iterations"],
+                                              max_time_s=plan["polish_time_s"])
+            c = float(fit.cost_batch(np.asarray(pol["x"])[None])[0])
+            nfev += int(pol["nfev"]) + 1
+            done += 1
+            trace.append([float(nfev_proxy + nfev), min(c, c_x)])
+            notes.append(f"{tag}space mapping {rnd + 1}: corrected proxy cost {c_m:.3g}, simulated cost {c:.4g}")
+            if c >= c_x * (1 - 1e-6):
+                break
+            x, c_x = np.asarray(pol["x"]), c
+        return x, c_x, done
+
+    best_x, best_c, rounds = space_mapping(a, fit, weights, best_x, best_c, "")
+    ml_note = ""
+    if snr_db is not None:
+        # maximum-likelihood weights from the noise read off the record, then the same stages again
+        w_ml, bias, ml_note = ml_bin_weights(a, params, best_x, _frequency_record(snr_db, seed))
+        nfev += ML_WEIGHT_DRAWS + 1
+        fine: ap.Approach = modal.Shifted(a, -bias)
+        fit = modal.Weighted(fine, w_ml)
+        pol = common.least_squares_polish(fit, best_x, max_nfev=plan["polish_iterations"],
+                                          max_time_s=plan["polish_time_s"])
+        nfev += int(pol["nfev"]) + 1
+        best_x = np.asarray(pol["x"])
+        best_c = float(fit.cost_batch(best_x[None])[0])
+        notes.append(f"maximum-likelihood weights ({ml_note}): simulated cost {best_c:.4g}")
+        best_x, best_c, more = space_mapping(fine, fit, w_ml, best_x, best_c, "ML ")
+        rounds += more
+    cost_at_target = float(fit.cost_batch(params.to_unit({k: TARGET[k] for k in NAMES})[None])[0])
     values = params.values(best_x)
     est = {k: float(values[k]) for k in NAMES}
     errors = common.errors_percent(est, TARGET)
     wall = time.perf_counter() - t0
     method = (f"{fp['restarts']} x [{plan['method']} on the analytic proxy -> least squares] -> least squares "
-              f"on the simulated residuals from the {len(starts)} lowest; lowest cost kept")
+              f"on the simulated residuals from the {len(starts)} lowest; {rounds} space-mapping round(s) "
+              "(the proxy corrected by its difference from the simulated path at the best point)"
+              + ("; then maximum-likelihood bin weights and bias correction from the noise read off the record, "
+                 "least squares and space mapping again" if ml_note else "") + "; lowest cost kept")
     return {
         "study": NAME, "case": case_key("frequency", optimiser, "rmse", snr_db), "approach": "frequency",
         "optimiser": optimiser, "cost_function": "rmse", "snr_db": snr_db, "drive": "bridge", "engine": a.engine,
@@ -825,18 +959,20 @@ def cells_table(rows: Sequence[dict[str, Any]]) -> str:
 def run(quick: bool = True, out: str | None = None, scheduler: str | None = None, workers: int | None = None,
         seed: int = 1, progress: bool = True, approaches: Sequence[str] | None = None, seeds: int = 1,
         snr_db: Sequence[float] | None = None, optimisers: Sequence[str] | None = None,
-        metrics: Sequence[str] | None = None, search: bool = True) -> dict[str, Any]:
+        metrics: Sequence[str] | None = None, search: bool = True, noise_free: bool = True) -> dict[str, Any]:
     """Run (or resume) the study; the JSON answer of ``pris-cosim study three-section``.
 
     ``seeds`` repeats every cell over seeds ``seed .. seed + seeds - 1``;
-    ``snr_db`` adds noisy-target cells at those levels (the noise-free
-    cells always run). Rows are one per cell (:func:`cells.aggregate`);
+    ``snr_db`` adds noisy-target cells at those levels; ``noise_free=False``
+    leaves out the noise-free cells (they run by default). Rows are one per cell (:func:`cells.aggregate`);
     the single runs are under ``runs``.
     """
     t0 = time.perf_counter()
     if seeds < 1:
         raise common.StudyError(f"--seeds must be at least 1 (got {seeds})")
-    levels: list[float | None] = [None] + [float(x) for x in (snr_db or [])]
+    levels: list[float | None] = ([None] if noise_free else []) + [float(x) for x in (snr_db or [])]
+    if not levels:
+        raise common.StudyError("no noise level to run: give an SNR or keep the noise-free cells")
     ts = tasks(quick, seed, approaches, seeds, levels, optimisers, metrics, search)
     results = common.run_study(NAME, ts, out, scheduler, workers, progress)
     runs = [r for r in results if "errors_percent" in r]
