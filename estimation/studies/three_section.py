@@ -348,7 +348,7 @@ def optimiser_settings(approach: str, optimiser: str, quick: bool) -> dict[str, 
                                          (1000 if approach == "emd" else 10000)},
             "frequency_proxy": {"restarts": 8 if quick else 16, "budget": Budget(max_evals=10000 if quick else 20000),
                                 "candidates": 1 if quick else 4, "mapping_rounds": 2 if quick else 4,
-                                "mapping_restarts": 3 if quick else 8}}
+                                "mapping_restarts": 3 if quick else 8, "mapping_polish": 12 if quick else 40}}
 
 
 def run_one(approach: str, optimiser: str, metric: str, quick: bool = True, seed: int = 1,
@@ -726,6 +726,15 @@ def _run_frequency_staged(a: ap.SimulatedFrequency, params: ParameterSet, optimi
     polished by least squares on the proxy's residuals, and the ``candidates``
     lowest distinct proxy minima are polished by least squares on the
     simulated path's residuals; the lowest simulated cost is kept.
+
+    Under noise the bins are then weighted by the inverse of their spread and
+    corrected for the noise's bias, both from a bootstrap of the noise read off
+    the record at that estimate (:func:`ml_bin_weights`), and polished again.
+    Last, ``mapping_rounds`` rounds of output space mapping: the proxy plus its
+    difference from the simulated path at the best point (the Welch window's
+    smoothing of the resonances, which biases the bare proxy's minima) is
+    optimised again and its minimum polished on the simulated path, while that
+    lowers the cost.
     """
     fp = plan["frequency_proxy"]
     weights = bin_weights(snr_db, seed, a.bins) if snr_db is not None else None
@@ -775,7 +784,7 @@ def _run_frequency_staged(a: ap.SimulatedFrequency, params: ParameterSet, optimi
                 nfev_proxy += int(r1.nfev)
                 found_m.append((float(r1.fun), np.asarray(r1.x)))
             c_m, x_m = min(found_m, key=lambda q: q[0])
-            pol = common.least_squares_polish(fit, x_m, max_nfev=plan["polish_iterations"],
+            pol = common.least_squares_polish(fit, x_m, max_nfev=fp.get("mapping_polish", plan["polish_iterations"]),
                                               max_time_s=plan["polish_time_s"])
             c = float(fit.cost_batch(np.asarray(pol["x"])[None])[0])
             nfev += int(pol["nfev"]) + 1
@@ -787,9 +796,11 @@ def _run_frequency_staged(a: ap.SimulatedFrequency, params: ParameterSet, optimi
             x, c_x = np.asarray(pol["x"]), c
         return x, c_x, done
 
-    best_x, best_c, rounds = space_mapping(a, fit, weights, best_x, best_c, "")
+    rounds = 0
     ml_note = ""
-    if snr_db is not None:
+    if snr_db is None:
+        best_x, best_c, rounds = space_mapping(a, fit, weights, best_x, best_c, "")
+    else:
         # maximum-likelihood weights from the noise read off the record, then the same stages again
         w_ml, bias, ml_note = ml_bin_weights(a, params, best_x, _frequency_record(snr_db, seed))
         nfev += ML_WEIGHT_DRAWS + 1
@@ -801,18 +812,18 @@ def _run_frequency_staged(a: ap.SimulatedFrequency, params: ParameterSet, optimi
         best_x = np.asarray(pol["x"])
         best_c = float(fit.cost_batch(best_x[None])[0])
         notes.append(f"maximum-likelihood weights ({ml_note}): simulated cost {best_c:.4g}")
-        best_x, best_c, more = space_mapping(fine, fit, w_ml, best_x, best_c, "ML ")
-        rounds += more
+        best_x, best_c, rounds = space_mapping(fine, fit, w_ml, best_x, best_c, "ML ")
     cost_at_target = float(fit.cost_batch(params.to_unit({k: TARGET[k] for k in NAMES})[None])[0])
     values = params.values(best_x)
     est = {k: float(values[k]) for k in NAMES}
     errors = common.errors_percent(est, TARGET)
     wall = time.perf_counter() - t0
     method = (f"{fp['restarts']} x [{plan['method']} on the analytic proxy -> least squares] -> least squares "
-              f"on the simulated residuals from the {len(starts)} lowest; {rounds} space-mapping round(s) "
-              "(the proxy corrected by its difference from the simulated path at the best point)"
-              + ("; then maximum-likelihood bin weights and bias correction from the noise read off the record, "
-                 "least squares and space mapping again" if ml_note else "") + "; lowest cost kept")
+              f"on the simulated residuals from the {len(starts)} lowest"
+              + ("; maximum-likelihood bin weights and bias correction from the noise read off the record, "
+                 "least squares" if ml_note else "")
+              + f"; {rounds} space-mapping round(s) (the proxy corrected by its difference from the simulated "
+                "path at the best point); lowest cost kept")
     return {
         "study": NAME, "case": case_key("frequency", optimiser, "rmse", snr_db), "approach": "frequency",
         "optimiser": optimiser, "cost_function": "rmse", "snr_db": snr_db, "drive": "bridge", "engine": a.engine,
