@@ -131,3 +131,26 @@ def test_one_seed_at_40_db_reaches_the_bound_rule(approach):
     bad = {k: (round(e, 3), limits[k]) for k, e in row["errors_percent"].items() if not abs(e) <= limits[k]}
     assert not bad, bad
     assert row["success"]
+
+
+def test_a_miss_is_classified_by_the_cost_at_the_truth():
+    # the estimate's cost no higher than the truth's: the cost's own minimum lies beyond the limit
+    assert three.failure_kind(1.0, 1.0) == "cost" and three.failure_kind(0.9, 1.0) == "cost"
+    # higher: the search missed the truth's valley
+    assert three.failure_kind(1.01, 1.0) == "search"
+    rows = cells.aggregate([
+        {"case": "c", "errors_percent": {"a": 9.0}, "cost": 1.0, "evaluations": 1, "wall_s": 1.0, "cpu_s": 0.5,
+         "settings": {"seed": s}, "success": False, "failure": kind} for s, kind in ((1, "cost"), (2, "search"))]
+        + [{"case": "c", "errors_percent": {"a": 1.0}, "cost": 1.0, "evaluations": 1, "wall_s": 1.0, "cpu_s": 0.5,
+            "settings": {"seed": 3}, "success": True}], lambda r: r["case"])
+    assert rows[0]["failures"] == {"cost": 1, "search": 1} and rows[0]["cpu_s_total"] == pytest.approx(1.5)
+
+
+def test_shifted_residuals_add_the_offset_to_every_row():
+    params = three.make_params()
+    a = three.build_approach("time", "rmse", params)
+    off = np.linspace(-1.0, 1.0, a.v_target.size)
+    u = np.full((2, a.n), 0.5)
+    r0, r1 = a.residuals(u), modal.Shifted(a, off).residuals(u)
+    assert np.allclose(r1 - r0, off[None, :])
+    assert modal.Shifted(a, off).cost_batch(u) == pytest.approx(np.sum(r1 ** 2, axis=1))
