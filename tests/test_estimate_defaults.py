@@ -188,6 +188,7 @@ def test_reference_solver_agrees_with_thesis_values():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_two_section_ten_independent_targets(tmp_path):
     """Ten random windings, responses from the nodal solver above; ``estimate`` with its defaults.
 
@@ -245,6 +246,7 @@ def _ten_targets(name: str, tmp_path, points: int, budget: dict | None = None) -
 
 
 @pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.parametrize("name", ["three-section", "cascade-4"])
 def test_one_port_models_ten_independent_targets(name, tmp_path):
     """Ten random windings per one-port model, ``Zin`` from the nodal solver above, ``estimate`` with its defaults.
@@ -262,7 +264,8 @@ def test_one_port_models_ten_independent_targets(name, tmp_path):
 
 
 @pytest.mark.parametrize("name", ["hv-4section", "hv-4section-cab2a", "hv-4section-cab2b", "hv-6section",
-                                  "hv-6section-passive", "hv-6section-freqdep"])
+                                  "hv-6section-passive",
+                                  pytest.param("hv-6section-freqdep", marks=pytest.mark.long)])
 @pytest.mark.slow
 def test_two_winding_models_ten_targets_say_so(name, tmp_path):
     """Ten random targets per two-winding model (33-43 parameters), six responses from the nodal solver above.
