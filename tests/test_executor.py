@@ -474,12 +474,14 @@ def test_ctrl_c_to_the_group_stops_with_one_line_and_resume_gives_the_same_answe
     proc = _start(out, 1)
     _wait_for_runs(out, 1, proc)
     os.killpg(proc.pid, signal.SIGINT)  # as Ctrl-C on a terminal: main process, fork server and workers
-    code, stdout, stderr = _finish(proc, timeout=10)
+    code, stdout, stderr = _finish(proc, timeout=60)  # generous: a loaded machine stops the group slowly
+    if code == 0:  # the second run ended before the signal arrived (a loaded machine): nothing to interrupt
+        pytest.skip("both runs finished before the interrupt arrived")
     assert code == 130 and stdout == ""
     last = stderr.strip().splitlines()[-1]
     assert last == f"pris-cosim study: interrupted: 1 of 2 runs stored in {out}; run the same command again to resume"
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr
-    assert _group_gone(proc.pid, 5)
+    assert _group_gone(proc.pid, 20)
     stored = (out / "runs" / "two-section-case4-quick-seed1.json").read_text()
     code, stdout, stderr = _finish(_start(out, 1))
     assert code == 0, stderr
