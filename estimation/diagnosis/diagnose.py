@@ -810,15 +810,41 @@ def _extend(ctx: _Context, current: FitResult, cause: str, single: FitResult, va
         tails = [[np.log(g[p.name]) if p.log else g[p.name] for p in eff.parameters] for g in grid]
         if eff is single.effects[0]:
             tails.insert(0, list(single.x[current_nc(single):]))
-        x0s = np.array([[0.0] * fit.nc + cur_tail + t for t in tails])
-        pre = fit.fit(x0s=x0s, grid=False, circuit_free=False, max_nfev=40, keep_starts=2)
-        res = fit.fit(x0s=pre.x[None], grid=False, keep_starts=1, max_nfev=50, must_beat=current.objective, tol=1e-6)
-        res.structure = current.structure
-        res.causes = list(current.causes) + [cause]
-        res.cause = "+".join(res.causes)
-        if best is None or res.objective < best.objective:
-            best = res
+        # from the current model's values and (with a design prior) from the design values: the current values
+        # absorbed what the named causes left, the design values did not
+        for circ in [np.zeros(fit.nc)] + ([dx] if (dx := _design_x(ctx, fit)) is not None else []):
+            x0s = np.array([list(circ) + cur_tail + t for t in tails])
+            try:
+                pre = fit.fit(x0s=x0s, grid=False, circuit_free=False, max_nfev=40, keep_starts=2)
+                res = fit.fit(x0s=pre.x[None], grid=False, keep_starts=1, max_nfev=50, must_beat=current.objective,
+                              tol=1e-6)
+            except _CANDIDATE_FAILURES:
+                continue
+            res.structure = current.structure
+            res.causes = list(current.causes) + [cause]
+            res.cause = "+".join(res.causes)
+            if best is None or res.objective < best.objective:
+                best = res
     return best
+
+
+def _design_x(ctx: _Context, fit: FrequencyFit) -> np.ndarray | None:
+    """The circuit part of ``fit``'s parameter vector at the design values (``None`` without a design prior).
+
+    Values the prior does not anchor (elements of a changed section, added elements) keep their start.
+    """
+    if ctx.prior is None:
+        return None
+    anchored = ctx.prior.anchored(fit.circuit)
+    x = np.zeros(fit.nc)
+    for i, n in enumerate(fit.free):
+        d = ctx.prior.design.get(n.lower())
+        if d and n.lower() in anchored and fit.start[i] > 0:
+            x[i] = np.log(d / fit.start[i])
+    if not np.any(x):
+        return None
+    lo, hi = fit.bounds()
+    return np.clip(x, lo[: fit.nc] + 1e-9, hi[: fit.nc] - 1e-9)
 
 
 def current_nc(r: FitResult) -> int:
