@@ -747,6 +747,9 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
     if ctx.prior is None:
         return []
     drift = ctx.drift(final)
+    if drift:
+        _log("beyond the tolerance before relaxing: " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift),
+             progress)
     current, freed = final, []
     while len(freed) < MAX_FREED:
         todo = [d for d in drift if d["name"].lower() not in freed]
