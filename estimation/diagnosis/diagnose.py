@@ -194,6 +194,10 @@ class _Context:
         anchored = self.prior.anchored(r.circuit)
         return self.prior.drift({n: v for n, v in r.values.items() if n.lower() in anchored})
 
+    def distorted(self, r: FitResult) -> bool:
+        """``r`` moved a value more than ``GROSS_DRIFT`` tolerances from the design (never without a prior)."""
+        return any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
+
     def explained(self, r: FitResult) -> bool:
         """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
         return r.objective <= NOISE_MARGIN * self.floor and not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
@@ -616,7 +620,7 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.cause = "+".join(res.causes)
         if best is None or res.objective < best.objective:
             best = res
-    if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor
+    if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
                                     or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
         found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
         if found is not None and (best is None or found[0].objective < best.objective):
