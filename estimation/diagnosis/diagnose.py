@@ -732,6 +732,8 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
 
 #: Most values freed from the prior when the drift is relaxed (:func:`_relaxed_drift`).
 MAX_FREED = 4
+#: Most drifted values (the furthest off) checked against their design values; the others are not reported.
+MAX_HELD = 6
 #: A drifted value is reported only if holding it at its design value worsens the BIC by this much ("very strong").
 DRIFT_MIN_DBIC = 10.0
 
@@ -742,10 +744,12 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
     The prior pulls a value that is really off the design back towards it,
     and the others then move to make up for it. The value furthest beyond the
     tolerance is freed (its prior removed) and the model refitted; then the
-    next, while any is left beyond the tolerance (at most ``MAX_FREED``).
+    next, while any is left more than ``GROSS_DRIFT`` tolerances off (at most
+    ``MAX_FREED``).
     What stays beyond it after that is the drift reported, with the refitted
     values, and of those only the values the data need: held at its design
-    value (the others refitted), the fit must lose ``DRIFT_MIN_DBIC``. The
+    value (the others refitted), the fit must lose ``DRIFT_MIN_DBIC`` (the
+    ``MAX_HELD`` furthest off are checked). The
     named causes and the gain are not changed by this.
     """
     if ctx.prior is None:
@@ -756,7 +760,8 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
              progress)
     current, freed = final, []
     while len(freed) < MAX_FREED:
-        todo = [d for d in drift if d["name"].lower() not in freed]
+        # a value just beyond the tolerance is within the prior's reach: freeing it only lets it wander
+        todo = [d for d in drift if d["name"].lower() not in freed and d["sigmas"] > GROSS_DRIFT]
         if not todo:
             break
         freed.append(todo[0]["name"].lower())
@@ -776,7 +781,7 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
     # the fit must lose at least DRIFT_MIN_DBIC
     loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
     kept = []
-    for d in drift:
+    for d in drift[:MAX_HELD]:
         name = d["name"]
         try:
             held = current.fitted_circuit().with_values({name: d["design"]})
