@@ -734,7 +734,8 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
 MAX_FREED = 4
 #: Most drifted values (the furthest off) checked against their design values; the others are not reported.
 MAX_HELD = 6
-#: A drifted value is reported only if holding it at its design value worsens the BIC by this much ("very strong").
+#: A drifted value is reported only if holding it at the edge of the tolerance worsens the BIC by this much ("very
+#: strong").
 DRIFT_MIN_DBIC = 10.0
 
 
@@ -747,8 +748,9 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
     next, while any is left more than ``GROSS_DRIFT`` tolerances off (at most
     ``MAX_FREED``).
     What stays beyond it after that is the drift reported, with the refitted
-    values, and of those only the values the data need: held at its design
-    value (the others refitted), the fit must lose ``DRIFT_MIN_DBIC`` (the
+    values, and of those only the values the data need beyond the tolerance:
+    held at the tolerance's edge on its side (the others refitted), the fit
+    must lose ``DRIFT_MIN_DBIC`` (the
     ``MAX_HELD`` furthest off are checked). The
     named causes and the gain are not changed by this.
     """
@@ -777,14 +779,15 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
     if freed:
         _log(f"drift relaxed: {', '.join(freed)} freed from the prior; cost {final.cost:.4g} -> {current.cost:.4g}",
              progress)
-    # a value the data do not need off the design is not reported: held at its design value (the others refitted),
-    # the fit must lose at least DRIFT_MIN_DBIC
+    # a value the data do not need beyond the tolerance is not reported: held at the edge of the tolerance on its
+    # side (design x (1 + tolerance) or / (1 + tolerance); the others refitted), the fit must lose DRIFT_MIN_DBIC
     loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
     kept = []
     for d in drift[:MAX_HELD]:
         name = d["name"]
         try:
-            held = current.fitted_circuit().with_values({name: d["design"]})
+            edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
+            held = current.fitted_circuit().with_values({name: edge})
             fit = ctx.fit(held, current.effects, fixed=[name], prior=loose)
             tail = current.x[current_nc(current):]
             trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=40, tol=1e-6)
@@ -795,8 +798,8 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
         if d["delta_bic"] >= DRIFT_MIN_DBIC:
             kept.append(d)
         else:
-            _log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it (dBIC "
-                 f"{d['delta_bic']:.1f} at its design value): not reported", progress)
+            _log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
+                 f"(dBIC {d['delta_bic']:.1f} at its edge): not reported", progress)
     return kept
 
 
