@@ -250,7 +250,8 @@ def design_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003, 
                 points: int = 200) -> HiddenCase:
     """A winding built to a design: the baseline netlist is the design, the truth its values within 10 %.
 
-    A 4- to 6-section cascade (1 kHz - 10 MHz). With ``drift`` one
+    A 4- to 6-section cascade (1 kHz - 10 MHz); with a missing section the
+    winding has one section more, two of which the design merges. With ``drift`` one
     capacitance of the truth is at twice its design value (a value off the
     design, not a catalogue cause: ``truth["drift"]`` names it). Hidden
     effects as in :func:`one_port_case`.
@@ -259,19 +260,29 @@ def design_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003, 
     rng = np.random.default_rng([seed, 33, int(drift)] + [SINGLE.index(c) for c in causes])
     n = int(rng.choice([4, 5, 6]))
     f = np.logspace(3, 7, points)
-    R = list(1.5 * rng.uniform(0.7, 1.4, n) * 4 / n)
-    L = list(2.5e-3 * rng.uniform(0.8, 1.3, n) * 4 / n)
-    C = list(0.8e-9 * rng.uniform(0.8, 1.3, n) * n / 4)
-    Cg = list(0.9e-9 * rng.uniform(0.8, 1.3, n) * 4 / n)
-    k = _couplings(n, rng.uniform(0.6, 0.8), rng.uniform(1.5, 4.0))
-    design = _cascade(R, L, C, Cg, k)
+    missing = "missing-section" in causes
+    nt = n + 1 if missing else n  # with a missing section the winding has one section more than its design
+    R = list(1.5 * rng.uniform(0.7, 1.4, nt) * 4 / nt)
+    L = list(2.5e-3 * rng.uniform(0.8, 1.3, nt) * 4 / nt)
+    C = list(0.8e-9 * rng.uniform(0.8, 1.3, nt) * nt / 4)
+    Cg = list(0.9e-9 * rng.uniform(0.8, 1.3, nt) * 4 / nt)
+    k = _couplings(nt, rng.uniform(0.6, 0.8), rng.uniform(1.5, 4.0))
+    truth: dict = {"sections": nt, "spread": DESIGN_SPREAD}
+    if missing:  # the design merges two adjacent sections of the winding (series R and L, series C, one Cg)
+        j = int(rng.integers(0, n))
+        M = k[j, j + 1] * np.sqrt(L[j] * L[j + 1])
+        design = _cascade(R[:j] + [R[j] + R[j + 1]] + R[j + 2:], L[:j] + [L[j] + L[j + 1] + 2 * M] + L[j + 2:],
+                          C[:j] + [C[j] * C[j + 1] / (C[j] + C[j + 1])] + C[j + 2:], Cg[:j + 1] + Cg[j + 2:],
+                          np.delete(np.delete(k, j + 1, 0), j + 1, 1))
+        truth["merged_sections"] = (j + 1, j + 2)
+    else:
+        design = _cascade(R, L, C, Cg, k)
     jit = lambda v: [x * rng.uniform(1 - DESIGN_SPREAD, 1 + DESIGN_SPREAD) for x in v]  # noqa: E731
     Rt, Lt, Ct, Cgt = jit(R), jit(L), jit(C), jit(Cg)
-    truth: dict = {"sections": n, "spread": DESIGN_SPREAD}
     if drift:
         j = int(rng.integers(0, n))
         Ct[j] = 2 * C[j]
-        truth["drift"] = [f"C{j + 1}"]
+        truth["drift"] = [f"C{j + 1}"]  # (with a missing section, the name of the winding's section)
     truth_net = _cascade(Rt, Lt, Ct, Cgt, k)
     nets = {"baseline": design.copy(), "merged": design.copy(), "sections": truth_net.copy()}
     _one_port_effects(truth_net, causes, rng, f, truth)

@@ -194,6 +194,10 @@ class _Context:
         anchored = self.prior.anchored(r.circuit)
         return self.prior.drift({n: v for n, v in r.values.items() if n.lower() in anchored})
 
+    def distorted(self, r: FitResult) -> bool:
+        """``r`` moved a value more than ``GROSS_DRIFT`` tolerances from the design (never without a prior)."""
+        return any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
+
     def explained(self, r: FitResult) -> bool:
         """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
         return r.objective <= NOISE_MARGIN * self.floor and not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
@@ -616,7 +620,7 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.cause = "+".join(res.causes)
         if best is None or res.objective < best.objective:
             best = res
-    if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor
+    if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
                                     or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
         found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
         if found is not None and (best is None or found[0].objective < best.objective):
@@ -728,7 +732,10 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
 
 #: Most values freed from the prior when the drift is relaxed (:func:`_relaxed_drift`).
 MAX_FREED = 4
-#: A drifted value is reported only if holding it at its design value worsens the BIC by this much ("very strong").
+#: Most drifted values (the furthest off) checked against their design values; the others are not reported.
+MAX_HELD = 6
+#: A drifted value is reported only if holding it at the edge of the tolerance worsens the BIC by this much ("very
+#: strong").
 DRIFT_MIN_DBIC = 10.0
 
 
@@ -738,18 +745,25 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
     The prior pulls a value that is really off the design back towards it,
     and the others then move to make up for it. The value furthest beyond the
     tolerance is freed (its prior removed) and the model refitted; then the
-    next, while any is left beyond the tolerance (at most ``MAX_FREED``).
+    next, while any is left more than ``GROSS_DRIFT`` tolerances off (at most
+    ``MAX_FREED``).
     What stays beyond it after that is the drift reported, with the refitted
-    values, and of those only the values the data need: held at its design
-    value (the others refitted), the fit must lose ``DRIFT_MIN_DBIC``. The
+    values, and of those only the values the data need beyond the tolerance:
+    held at the tolerance's edge on its side (the others refitted), the fit
+    must lose ``DRIFT_MIN_DBIC`` (the
+    ``MAX_HELD`` furthest off are checked). The
     named causes and the gain are not changed by this.
     """
     if ctx.prior is None:
         return []
     drift = ctx.drift(final)
+    if drift:
+        _log("beyond the tolerance before relaxing: " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift),
+             progress)
     current, freed = final, []
     while len(freed) < MAX_FREED:
-        todo = [d for d in drift if d["name"].lower() not in freed]
+        # a value just beyond the tolerance is within the prior's reach: freeing it only lets it wander
+        todo = [d for d in drift if d["name"].lower() not in freed and d["sigmas"] > GROSS_DRIFT]
         if not todo:
             break
         freed.append(todo[0]["name"].lower())
@@ -765,14 +779,15 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
     if freed:
         _log(f"drift relaxed: {', '.join(freed)} freed from the prior; cost {final.cost:.4g} -> {current.cost:.4g}",
              progress)
-    # a value the data do not need off the design is not reported: held at its design value (the others refitted),
-    # the fit must lose at least DRIFT_MIN_DBIC
+    # a value the data do not need beyond the tolerance is not reported: held at the edge of the tolerance on its
+    # side (design x (1 + tolerance) or / (1 + tolerance); the others refitted), the fit must lose DRIFT_MIN_DBIC
     loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
     kept = []
-    for d in drift:
+    for d in drift[:MAX_HELD]:
         name = d["name"]
         try:
-            held = current.fitted_circuit().with_values({name: d["design"]})
+            edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
+            held = current.fitted_circuit().with_values({name: edge})
             fit = ctx.fit(held, current.effects, fixed=[name], prior=loose)
             tail = current.x[current_nc(current):]
             trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=40, tol=1e-6)
@@ -783,8 +798,8 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
         if d["delta_bic"] >= DRIFT_MIN_DBIC:
             kept.append(d)
         else:
-            _log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it (dBIC "
-                 f"{d['delta_bic']:.1f} at its design value): not reported", progress)
+            _log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
+                 f"(dBIC {d['delta_bic']:.1f} at its edge): not reported", progress)
     return kept
 
 
@@ -810,15 +825,41 @@ def _extend(ctx: _Context, current: FitResult, cause: str, single: FitResult, va
         tails = [[np.log(g[p.name]) if p.log else g[p.name] for p in eff.parameters] for g in grid]
         if eff is single.effects[0]:
             tails.insert(0, list(single.x[current_nc(single):]))
-        x0s = np.array([[0.0] * fit.nc + cur_tail + t for t in tails])
-        pre = fit.fit(x0s=x0s, grid=False, circuit_free=False, max_nfev=40, keep_starts=2)
-        res = fit.fit(x0s=pre.x[None], grid=False, keep_starts=1, max_nfev=50, must_beat=current.objective, tol=1e-6)
-        res.structure = current.structure
-        res.causes = list(current.causes) + [cause]
-        res.cause = "+".join(res.causes)
-        if best is None or res.objective < best.objective:
-            best = res
+        # from the current model's values and (with a design prior) from the design values: the current values
+        # absorbed what the named causes left, the design values did not
+        for circ in [np.zeros(fit.nc)] + ([dx] if (dx := _design_x(ctx, fit)) is not None else []):
+            x0s = np.array([list(circ) + cur_tail + t for t in tails])
+            try:
+                pre = fit.fit(x0s=x0s, grid=False, circuit_free=False, max_nfev=40, keep_starts=2)
+                res = fit.fit(x0s=pre.x[None], grid=False, keep_starts=1, max_nfev=50, must_beat=current.objective,
+                              tol=1e-6)
+            except _CANDIDATE_FAILURES:
+                continue
+            res.structure = current.structure
+            res.causes = list(current.causes) + [cause]
+            res.cause = "+".join(res.causes)
+            if best is None or res.objective < best.objective:
+                best = res
     return best
+
+
+def _design_x(ctx: _Context, fit: FrequencyFit) -> np.ndarray | None:
+    """The circuit part of ``fit``'s parameter vector at the design values (``None`` without a design prior).
+
+    Values the prior does not anchor (elements of a changed section, added elements) keep their start.
+    """
+    if ctx.prior is None:
+        return None
+    anchored = ctx.prior.anchored(fit.circuit)
+    x = np.zeros(fit.nc)
+    for i, n in enumerate(fit.free):
+        d = ctx.prior.design.get(n.lower())
+        if d and n.lower() in anchored and fit.start[i] > 0:
+            x[i] = np.log(d / fit.start[i])
+    if not np.any(x):
+        return None
+    lo, hi = fit.bounds()
+    return np.clip(x, lo[: fit.nc] + 1e-9, hi[: fit.nc] - 1e-9)
 
 
 def current_nc(r: FitResult) -> int:
