@@ -10,6 +10,16 @@ the truth's replay score under each input hold, the hold chosen from the data, a
 six free values (``L_a``, ``L_b``, ``L_c``, ``C_a``, ``C_b``, ``k_ab``, bounds 0.2x .. 5x the truth;
 the others set through ``"values"``): per-parameter errors, FMU runs, wall time, the verdict. Each
 estimate runs as a ``pris-cosim estimate`` subprocess (a pythonfmu FMU may crash its host when freed).
+``--records`` picks the records (default both).
+
+The peer, run for real: ``--ladder DIR --peers [--peer-venv PATH] [--peer-wall S] [--peer-maxiter N]``
+creates a throwaway virtual environment outside the repository (default: a new temporary directory),
+``pip install``s estim8 there (``--peer-package``) and, after our estimate of each record, runs
+``benchmarks/peers/estim8_driver.py`` with that environment's Python: estim8's differential evolution
+polished by L-BFGS-B on the same FMU, record, free values and bounds, one process, capped at
+``--peer-wall`` seconds (default 900). Printed and written to ``bench_estimate_fmu_peers.json``:
+per-parameter errors, FMU runs (ours also in whole-record equivalents), wall times, ours beside theirs,
+the ratio of runs and whether ours is within 2 % where theirs is not with at most a tenth of their runs.
 
 For every case the prebuilt arrangement FMU (``fmus/*/..._pris.fmu``) makes
 a 1 MHz record with fmpy's ``simulate_fmu`` (two-section: 50 ms, the peers'
@@ -26,8 +36,6 @@ comparison record; three-section: 10 ms). Printed:
    couplings k12, k13, k23 within 0.85 .. 0.95, thesis Table 4.8): parameter
    errors, FMU runs (failed ones), wall time, the verdict.
 
-Peers tried on the same two-section record (estim8 0.1.6, ModestPy 0.1.1) reached
-errors up to ~800 %, the earlier pris-cosim time approach 534 %.
 Wall times depend on the machine's load; they are printed as measured.
 """
 
