@@ -259,7 +259,7 @@ def ladder_peers(a: argparse.Namespace, d: Path, truth: dict[str, float], out: P
         print(f"   target (ours within 2 %, the peer not, at most a tenth of its runs in whole-record equivalents): "
               f"{'met' if summary[rec]['target_met'] else 'not met'}", flush=True)
     (out / "ladder-peers-summary.json").write_text(json.dumps(summary, indent=1))
-    write_results("bench_estimate_fmu_peers", tables=[
+    write_results(a.peer_results, tables=[
         table("Foreign FMU (three-section ladder, 2 MHz record, six free values, bounds 0.2x..5x): pris-cosim beside "
               "estim8", ["record", "estimator", "worst error (%)", "FMU runs", "whole-record equivalents", "wall (s)",
                          "converged / stopped"], rows),
@@ -336,6 +336,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--peer-wall", type=float, default=900.0, help="wall-time cap of each peer estimate, s")
     p.add_argument("--peer-maxiter", type=int, default=100, help="the peer's differential-evolution generations")
     p.add_argument("--peer-popsize", type=int, default=15, help="the peer's population factor (scipy's popsize)")
+    p.add_argument("--peer-results", default="bench_estimate_fmu_peers",
+                   help="name of the --peers result file in benchmarks/results (default bench_estimate_fmu_peers)")
     p.add_argument("--out", default="bench-estimate-fmu")
     p.add_argument("--json", action="store_true", help="also print one JSON object with everything")
     a = p.parse_args(argv)

@@ -25,10 +25,11 @@ Every answer of ``pris-cosim estimate`` carries a verdict (:func:`verdict`):
     From the Fisher information ``F = J^T J / sigma^2`` of the residuals,
     ``J[:, j] = d r / d ln(theta_j)`` at the estimate, and ``sigma`` the
     larger of the residual standard deviation ``sqrt(SSR / (N - n))`` and the
-    noise (0 for a simulated, exact target; otherwise the smaller of the
-    fourth-difference noise floors of the data and of the residual at the
-    estimate, so that signal near the Nyquist frequency is not read as noise;
-    at least 1e-12 of the data scale) (:func:`fisher_information`, the
+    noise (0 for a simulated, exact target; otherwise the fourth-difference
+    noise floor of the data, or that of the residual at the estimate when the
+    data's exceeds three times both it and the residual's spread: signal near
+    the Nyquist frequency is not read as noise; at least 1e-12 of the data
+    scale) (:func:`fisher_information`, the
     Cramer-Rao bound); ``inf`` for a parameter without effect.
 
 ``non_identifiable`` [names]
@@ -249,8 +250,13 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
     # the noise read from the data's fourth differences counts every component near the Nyquist
     # frequency as noise: a record whose modes lie above it (aliased, as the three-section winding
     # sampled at 1 MHz) reads as noisy without any noise. Where the model explains the data, the
-    # residual holds the noise and not the signal: the smaller of the two readings is the noise.
-    noise_sigma = noise if noise_given or not (finite.all() and r.size) else min(noise, noise_floor(r))
+    # residual holds the noise and not the signal: when the data's reading exceeds three times both
+    # the residual's spread and its own reading, it is signal, and the residual's reading is the noise.
+    noise_sigma = noise
+    if not noise_given and finite.all() and r.size:
+        n_res = noise_floor(r)
+        if noise > 3.0 * max(n_res, s_res):
+            noise_sigma = n_res
     sigma = max(s_res if math.isfinite(s_res) else 0.0, noise_sigma, 1e-12 * max(scale, 1e-300))
     fi = fisher_information(residuals, params, values, sigma)
     unc = {k: v / 100.0 for k, v in fi["relative_sd_percent"].items()}
