@@ -10,6 +10,16 @@ the truth's replay score under each input hold, the hold chosen from the data, a
 six free values (``L_a``, ``L_b``, ``L_c``, ``C_a``, ``C_b``, ``k_ab``, bounds 0.2x .. 5x the truth;
 the others set through ``"values"``): per-parameter errors, FMU runs, wall time, the verdict. Each
 estimate runs as a ``pris-cosim estimate`` subprocess (a pythonfmu FMU may crash its host when freed).
+``--records`` picks the records (default both).
+
+The peer, run for real: ``--ladder DIR --peers [--peer-venv PATH] [--peer-wall S] [--peer-maxiter N]``
+creates a throwaway virtual environment outside the repository (default: a new temporary directory),
+``pip install``s estim8 there (``--peer-package``) and, after our estimate of each record, runs
+``benchmarks/peers/estim8_driver.py`` with that environment's Python: estim8's differential evolution
+polished by L-BFGS-B on the same FMU, record, free values and bounds, one process, capped at
+``--peer-wall`` seconds (default 900). Printed and written to ``bench_estimate_fmu_peers.json``:
+per-parameter errors, FMU runs (ours also in whole-record equivalents), wall times, ours beside theirs,
+the ratio of runs and whether ours is within 2 % where theirs is not with at most a tenth of their runs.
 
 For every case the prebuilt arrangement FMU (``fmus/*/..._pris.fmu``) makes
 a 1 MHz record with fmpy's ``simulate_fmu`` (two-section: 50 ms, the peers'
@@ -26,8 +36,6 @@ comparison record; three-section: 10 ms). Printed:
    couplings k12, k13, k23 within 0.85 .. 0.95, thesis Table 4.8): parameter
    errors, FMU runs (failed ones), wall time, the verdict.
 
-Peers tried on the same two-section record (estim8 0.1.6, ModestPy 0.1.1) reached
-errors up to ~800 %, the earlier pris-cosim time approach 534 %.
 Wall times depend on the machine's load; they are printed as measured.
 """
 
@@ -110,54 +118,180 @@ def ladder_replay(d: Path, truth: dict[str, float], record: Path) -> dict[str, f
     return scores
 
 
-def ladder(a: argparse.Namespace, out: Path) -> int:
-    """Estimate the foreign ladder FMU from its two records (see the module docstring)."""
+def ladder_config(d: Path, rec: str, truth: dict[str, float], a: argparse.Namespace) -> dict:
+    """The ``pris-cosim estimate`` configuration of the ladder FMU: six free values, the others set."""
+    params = {k: {"min": 0.2 * truth[k], "max": min(5 * truth[k], 0.99) if k.startswith("k") else 5 * truth[k]}
+              for k in LADDER_FREE}
+    cfg = {"fmu": str(d / "ThreeSectionLadder.fmu"), "input": "u_drive", "output": "i_port",
+           "outputs": ["v_port"], "parameters": params,
+           "values": {k: v for k, v in truth.items() if k not in LADDER_FREE},
+           "target": {"kind": "waveforms-csv", "path": str(d / rec), "values": truth}, "seed": 1}
+    budget = {k: v for k, v in (("design", a.design), ("restarts", a.restarts), ("simulations", a.simulations))
+              if v is not None}
+    if budget:
+        cfg["budget"] = budget
+    return cfg
+
+
+def ladder_estimate(a: argparse.Namespace, d: Path, rec: str, truth: dict[str, float], out: Path) -> dict | None:
+    """Run ``pris-cosim estimate`` on one ladder record in a subprocess; its JSON answer, or None on failure."""
     import subprocess
 
+    cpath = out / f"ladder-{Path(rec).stem}.json"
+    cpath.write_text(json.dumps(ladder_config(d, rec, truth, a), indent=1))
+    cmd = [sys.executable, "-m", "pris_cosim.cli", "estimate", "--config", str(cpath), "--json",
+           "--out", str(out / f"ladder-{Path(rec).stem}")]
+    if a.workers:
+        cmd += ["--workers", str(a.workers)]
+    t0 = time.perf_counter()
+    p = subprocess.run(cmd, cwd=REPO, stdout=subprocess.PIPE, text=True)
+    wall = time.perf_counter() - t0
+    line = next((ln for ln in p.stdout.splitlines() if ln.startswith("{")), None)
+    if line is None:
+        print(f"   estimate failed (exit {p.returncode})")
+        return None
+    res = json.loads(line)
+    worst = max(abs(e) for e in res["errors_percent"].values())
+    print(f"   input hold: {res['input_hold']} ({res['input_hold_reason']})")
+    print(f"   worst error {worst:.3g} %, {res['fmu_simulations']} FMU runs "
+          f"({res['fmu_record_equivalents']:.0f} whole-record equivalents), {res['wall_s']:.1f} s "
+          f"(process {wall:.1f} s, exit {p.returncode}), converged {res['converged']}")
+    print(f"   verdict: {res['convergence_reason']}; non-identifiable: {res['non_identifiable'] or 'none'}")
+    for k, e in res["errors_percent"].items():
+        print(f"     {k:>5} {res['estimate'][k]:12.5g}  {e:+10.4f} %  (1-sigma {100 * res['uncertainty'][k]:.2g} %)")
+    for r in res["restarts"]:
+        stages = ", ".join(f"{s['stage']}: {s['runs']}" for s in r.get("runs_per_stage") or [])
+        print(f"   restart {r['restart']}: cost {r['cost']:.3g}, {r['simulations']} runs ({stages})")
+    res["worst_percent"], res["process_wall_s"] = worst, wall
+    return res
+
+
+PEER_DRIVER = REPO / "benchmarks" / "peers" / "estim8_driver.py"
+
+
+def peer_python(a: argparse.Namespace) -> Path:
+    """The Python of a throwaway virtual environment holding estim8 (created and filled when missing)."""
+    import subprocess
+    import tempfile
+    import venv
+
+    root = Path(a.peer_venv) if a.peer_venv else Path(tempfile.mkdtemp(prefix="pris-cosim-peer-"))
+    if REPO in root.resolve().parents or root.resolve() == REPO:
+        raise SystemExit(f"--peer-venv {root}: the peer's environment must lie outside the repository")
+    py = root / "bin" / "python"
+    if not py.exists():
+        print(f"== creating the peer's environment {root}", flush=True)
+        venv.create(root, with_pip=True)
+    probe = subprocess.run([str(py), "-c", "import estim8"], capture_output=True)
+    if probe.returncode:
+        print(f"== pip install {a.peer_package} into {root}", flush=True)
+        subprocess.run([str(py), "-m", "pip", "install", "-q", a.peer_package], check=True)
+    return py
+
+
+def peer_estimate(a: argparse.Namespace, py: Path, d: Path, rec: str, out: Path) -> dict:
+    """Run the peer (estim8, differential evolution polished by L-BFGS-B) on one ladder record."""
+    import os
+    import subprocess
+
+    res_path, prog = out / f"peer-{Path(rec).stem}.json", out / f"peer-{Path(rec).stem}-progress.json"
+    for f in (res_path, prog):
+        f.unlink(missing_ok=True)
+    cmd = [str(py), str(PEER_DRIVER), "--fmu", str(d / "ThreeSectionLadder.fmu"), "--record", str(d / rec),
+           "--truth", str(d / "truth.json"), "--input", "u_drive", "--outputs", "i_port,v_port",
+           "--free", ",".join(LADDER_FREE), "--maxiter", str(a.peer_maxiter), "--popsize", str(a.peer_popsize),
+           "--wall", str(a.peer_wall), "--out", str(res_path), "--progress", str(prog)]
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONWARNINGS="ignore")
+    env.pop("PYTHONPATH", None)
+    t0 = time.perf_counter()
+    p = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                       timeout=a.peer_wall + 600)
+    wall = time.perf_counter() - t0
+    if not res_path.exists():  # the FMU may crash the host when freed: read what was reached
+        doc = json.loads(prog.read_text()) if prog.exists() else {"runs": 0, "best": {}}
+        doc.update(stopped=f"process ended with exit {p.returncode} before its answer", estimate=doc["best"])
+        truth = json.loads((d / "truth.json").read_text())["truth"]
+        doc["errors_percent"] = {k: 100 * (v - truth[k]) / truth[k] for k, v in doc["best"].items()}
+        print(p.stderr[-2000:])
+    else:
+        doc = json.loads(res_path.read_text())
+    doc["process_wall_s"] = wall
+    doc["worst_percent"] = max((abs(e) for e in doc["errors_percent"].values()), default=float("nan"))
+    print(f"   peer {doc.get('peer', 'estim8')}: worst error {doc['worst_percent']:.3g} %, {doc['runs']} FMU runs, "
+          f"{doc.get('wall_s', wall):.1f} s ({doc['stopped']}); truth cost {doc.get('truth_cost', float('nan')):.3g}, "
+          f"end cost {doc.get('cost', float('nan')):.3g}", flush=True)
+    return doc
+
+
+def ladder_peers(a: argparse.Namespace, d: Path, truth: dict[str, float], out: Path) -> int:
+    """Ours beside the peer's on the same FMU and records: per-parameter errors, FMU runs, wall times."""
+    import os
+
+    from benchmarks.results_io import table, write_results
+
+    py = peer_python(a)
+    rows, err_rows, summary, loads = [], [], {}, []
+    for rec in a.records.split(","):
+        print(f"== {d.name}/{rec}: pris-cosim estimate", flush=True)
+        ours = ladder_estimate(a, d, rec, truth, out)
+        loads.append(os.getloadavg()[0])
+        if ours is None:
+            return 1
+        print(f"== {d.name}/{rec}: peer", flush=True)
+        peer = peer_estimate(a, py, d, rec, out)
+        loads.append(os.getloadavg()[0])
+        ratio_runs = ours["fmu_simulations"] / max(peer["runs"], 1)
+        ratio_eq = ours["fmu_record_equivalents"] / max(peer["runs"], 1)
+        met = ours["worst_percent"] <= 2.0 < peer["worst_percent"] and ratio_eq <= 0.1
+        print(f"   runs: ours {ours['fmu_simulations']} window runs = {ours['fmu_record_equivalents']:.0f} "
+              f"whole-record equivalents; peer {peer['runs']} whole-record runs; ratio {ratio_eq:.3f} "
+              f"(window runs {ratio_runs:.2f})", flush=True)
+        for k in LADDER_FREE:
+            err_rows.append([rec, k, truth[k], ours["errors_percent"][k], peer["errors_percent"].get(k, float("nan"))])
+        rows.append([rec, "pris-cosim", ours["worst_percent"], ours["fmu_simulations"],
+                     round(ours["fmu_record_equivalents"], 1), round(ours["wall_s"], 1), str(ours["converged"])])
+        rows.append([rec, f"{peer.get('peer', 'estim8')} (DE + L-BFGS-B)", peer["worst_percent"], peer["runs"],
+                     peer["runs"], round(peer.get("wall_s", peer["process_wall_s"]), 1), peer["stopped"]])
+        summary[rec] = {"ours": {k: ours[k] for k in ("worst_percent", "errors_percent", "fmu_simulations",
+                                                      "fmu_record_equivalents", "wall_s", "converged")},
+                        "peer": peer, "ratio_record_equivalents": ratio_eq, "ratio_window_runs": ratio_runs,
+                        "target_met": bool(met)}
+        print(f"   target (ours within 2 %, the peer not, at most a tenth of its runs in whole-record equivalents): "
+              f"{'met' if summary[rec]['target_met'] else 'not met'}", flush=True)
+    (out / "ladder-peers-summary.json").write_text(json.dumps(summary, indent=1))
+    write_results(a.peer_results, tables=[
+        table("Foreign FMU (three-section ladder, 2 MHz record, six free values, bounds 0.2x..5x): pris-cosim beside "
+              "estim8", ["record", "estimator", "worst error (%)", "FMU runs", "whole-record equivalents", "wall (s)",
+                         "converged / stopped"], rows),
+        table("Per-parameter errors, pris-cosim beside estim8", ["record", "parameter", "truth", "pris-cosim (%)",
+                                                                 "estim8 (%)"], err_rows),
+        table("FMU runs, pris-cosim over estim8", ["record", "window runs ratio", "whole-record equivalents ratio",
+                                                   "target met"],
+              [[r, s["ratio_window_runs"], s["ratio_record_equivalents"], str(s["target_met"])]
+               for r, s in summary.items()])],
+        summary=f"pris-cosim estimate and estim8 (scipy DE + L-BFGS-B, one process, wall cap {a.peer_wall:g} s) on the "
+                f"same foreign FMU and record; 1-minute load average during the runs {min(loads):.1f}..{max(loads):.1f} "
+                "on a shared 2-core machine")
+    return 0
+
+
+def ladder(a: argparse.Namespace, out: Path) -> int:
+    """Estimate the foreign ladder FMU from its two records (see the module docstring)."""
     from benchmarks.results_io import table, write_results
 
     d = Path(a.ladder).resolve()
     truth = json.loads((d / "truth.json").read_text())["truth"]
+    if a.peers:
+        return ladder_peers(a, d, truth, out)
     rows, errs_rows, summary = [], [], {}
-    for rec in ("record.csv", "record_noisy.csv"):
+    for rec in a.records.split(","):
         scores = ladder_replay(d, truth, d / rec)
         print(f"== {d.name}/{rec}: truth replay, zero-order hold {scores['zoh']:.3g}, linear {scores['linear']:.3g} "
               "of the output RMS", flush=True)
-        params = {k: {"min": 0.2 * truth[k], "max": min(5 * truth[k], 0.99) if k.startswith("k") else 5 * truth[k]}
-                  for k in LADDER_FREE}
-        cfg = {"fmu": str(d / "ThreeSectionLadder.fmu"), "input": "u_drive", "output": "i_port",
-               "outputs": ["v_port"], "parameters": params,
-               "values": {k: v for k, v in truth.items() if k not in LADDER_FREE},
-               "target": {"kind": "waveforms-csv", "path": str(d / rec), "values": truth}, "seed": 1}
-        budget = {k: v for k, v in (("design", a.design), ("restarts", a.restarts), ("simulations", a.simulations))
-                  if v is not None}
-        if budget:
-            cfg["budget"] = budget
-        cpath = out / f"ladder-{Path(rec).stem}.json"
-        cpath.write_text(json.dumps(cfg, indent=1))
-        cmd = [sys.executable, "-m", "pris_cosim.cli", "estimate", "--config", str(cpath), "--json",
-               "--out", str(out / f"ladder-{Path(rec).stem}")]
-        if a.workers:
-            cmd += ["--workers", str(a.workers)]
-        t0 = time.perf_counter()
-        p = subprocess.run(cmd, cwd=REPO, stdout=subprocess.PIPE, text=True)
-        wall = time.perf_counter() - t0
-        line = next((ln for ln in p.stdout.splitlines() if ln.startswith("{")), None)
-        if line is None:
-            print(f"   estimate failed (exit {p.returncode})")
+        res = ladder_estimate(a, d, rec, truth, out)
+        if res is None:
             return 1
-        res = json.loads(line)
-        worst = max(abs(e) for e in res["errors_percent"].values())
-        print(f"   input hold: {res['input_hold']} ({res['input_hold_reason']})")
-        print(f"   worst error {worst:.3g} %, {res['fmu_simulations']} FMU runs "
-              f"({res['fmu_record_equivalents']:.0f} whole-record equivalents), {res['wall_s']:.1f} s "
-              f"(process {wall:.1f} s, exit {p.returncode}), converged {res['converged']}")
-        print(f"   verdict: {res['convergence_reason']}; non-identifiable: {res['non_identifiable'] or 'none'}")
-        for k, e in res["errors_percent"].items():
-            print(f"     {k:>5} {res['estimate'][k]:12.5g}  {e:+10.4f} %  (1-sigma {100 * res['uncertainty'][k]:.2g} %)")
-        for r in res["restarts"]:
-            stages = ", ".join(f"{s['stage']}: {s['runs']}" for s in r.get("runs_per_stage") or [])
-            print(f"   restart {r['restart']}: cost {r['cost']:.3g}, {r['simulations']} runs ({stages})")
+        worst = res["worst_percent"]
         rows.append([rec, scores["zoh"], scores["linear"], res["input_hold"].split(" ")[0], worst,
                      res["fmu_simulations"], round(res["fmu_record_equivalents"], 1), round(res["wall_s"], 1),
                      str(res["converged"]), ", ".join(res["non_identifiable"]) or "none"])
@@ -194,6 +328,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--design-score", choices=["window", "frequency"], help="what ranks the design points")
     p.add_argument("--probes", action="store_true", help="also compare the internal node voltages (v_mid; v_n2, v_n3)")
     p.add_argument("--ladder", metavar="DIR", help="estimate the foreign ladder FMU in DIR (see the docstring)")
+    p.add_argument("--records", default="record.csv,record_noisy.csv", help="ladder records to estimate")
+    p.add_argument("--peers", action="store_true",
+                   help="with --ladder: also run estim8 on the same FMU and records (throwaway environment)")
+    p.add_argument("--peer-venv", metavar="PATH", help="the peer's virtual environment (default: a new temp dir)")
+    p.add_argument("--peer-package", default="estim8", help="what pip installs there (default estim8)")
+    p.add_argument("--peer-wall", type=float, default=900.0, help="wall-time cap of each peer estimate, s")
+    p.add_argument("--peer-maxiter", type=int, default=100, help="the peer's differential-evolution generations")
+    p.add_argument("--peer-popsize", type=int, default=15, help="the peer's population factor (scipy's popsize)")
+    p.add_argument("--peer-results", default="bench_estimate_fmu_peers",
+                   help="name of the --peers result file in benchmarks/results (default bench_estimate_fmu_peers)")
     p.add_argument("--out", default="bench-estimate-fmu")
     p.add_argument("--json", action="store_true", help="also print one JSON object with everything")
     a = p.parse_args(argv)

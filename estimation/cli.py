@@ -576,7 +576,8 @@ def _fit_and_report(cfg: dict[str, Any], approach: Any, params: Any, model: Any,
            "per_eval_s": approach.stats.per_eval_s, "message": outcome.message,
            "converged": v["converged"], "convergence_reason": v["convergence_reason"],
            "uncertainty": v["uncertainty"], "non_identifiable": v["non_identifiable"],
-           "verdict": {k: v[k] for k in ("residual_rms", "noise_floor", "tolerance", "at_bound", "restarts",
+           "non_identifiable_reasons": v["non_identifiable_reasons"],
+           "verdict": {k: v[k] for k in ("residual_rms", "noise_floor", "noise_sigma", "tolerance", "at_bound", "restarts",
                                          "condition")},
            "restarts": outcome.stages, "wall_s": time.perf_counter() - t0}
     if known_target is not None:

@@ -25,9 +25,12 @@ Every answer of ``pris-cosim estimate`` carries a verdict (:func:`verdict`):
     From the Fisher information ``F = J^T J / sigma^2`` of the residuals,
     ``J[:, j] = d r / d ln(theta_j)`` at the estimate, and ``sigma`` the
     larger of the residual standard deviation ``sqrt(SSR / (N - n))`` and the
-    noise floor (0 for a simulated, exact target; at least 1e-12 of the data
-    scale) (:func:`fisher_information`, the Cramer-Rao bound); ``inf`` for a
-    parameter without effect.
+    noise (0 for a simulated, exact target; otherwise the fourth-difference
+    noise floor of the data, or that of the residual at the estimate when the
+    data's exceeds three times both it and the residual's spread: signal near
+    the Nyquist frequency is not read as noise; at least 1e-12 of the data
+    scale) (:func:`fisher_information`, the
+    Cramer-Rao bound); ``inf`` for a parameter without effect.
 
 ``non_identifiable`` [names]
     Parameters whose relative 1-sigma exceeds 10 %, that lie in a (near)
@@ -213,6 +216,7 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
     r = np.asarray(residuals(x[None]), float)[0]
     finite = np.isfinite(r)
     rms = float(np.sqrt(np.mean(r[finite] ** 2))) if finite.all() and r.size else math.inf
+    noise_given = noise is not None
     noise, scale, tol = residual_tolerance(data, noise, scale)
     reasons: list[str] = []
     if not rms <= tol:
@@ -243,7 +247,17 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
         reasons.append(f"restarts reach the same cost at different {', '.join(k for k in names if k in differing)}")
     dof = max(1, r.size - len(names))
     s_res = rms * math.sqrt(r.size / dof) if math.isfinite(rms) else math.inf
-    sigma = max(s_res if math.isfinite(s_res) else 0.0, noise, 1e-12 * max(scale, 1e-300))
+    # the noise read from the data's fourth differences counts every component near the Nyquist
+    # frequency as noise: a record whose modes lie above it (aliased, as the three-section winding
+    # sampled at 1 MHz) reads as noisy without any noise. Where the model explains the data, the
+    # residual holds the noise and not the signal: when the data's reading exceeds three times both
+    # the residual's spread and its own reading, it is signal, and the residual's reading is the noise.
+    noise_sigma = noise
+    if not noise_given and finite.all() and r.size:
+        n_res = noise_floor(r)
+        if noise > 3.0 * max(n_res, s_res):
+            noise_sigma = n_res
+    sigma = max(s_res if math.isfinite(s_res) else 0.0, noise_sigma, 1e-12 * max(scale, 1e-300))
     fi = fisher_information(residuals, params, values, sigma)
     unc = {k: v / 100.0 for k, v in fi["relative_sd_percent"].items()}
     # optimality: the Gauss-Newton step from the estimate (relative, ln theta) must be negligible
@@ -282,6 +296,7 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
         "non_identifiable_reasons": why,
         "residual_rms": rms,
         "noise_floor": noise,
+        "noise_sigma": float(noise_sigma),
         "tolerance": tol,
         "at_bound": at_bound,
         "restarts": {"count": len(ends), "reached_best": reached, "agreeing": agreeing,
