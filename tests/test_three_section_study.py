@@ -13,6 +13,7 @@ import pytest
 from estimation.optimisers import Budget
 from estimation.studies import cells, modal
 from estimation.studies import three_section as three
+from estimation.studies import three_section_frequency as three_frequency
 
 
 def test_bridge_drive_reproduces_the_target_and_current_injection_does_not():
@@ -160,7 +161,7 @@ def test_target_resonances_match_the_analytic_impedance_peaks():
     """Peaks of the simulated target's Welch Zin against peaks of the analytic Zin on a fine grid."""
     from pris_cosim.models import get_model
 
-    got = three.frequency_peaks()
+    got = three_frequency.frequency_peaks()
     f = np.linspace(3e3, 1e6, 400_000)
     z = get_model(three.NAME).response_set().evaluate(f, {})["Zin"]
     ref = modal.response_peaks(f, z, prominence=0.3)
