@@ -326,7 +326,15 @@ def local_noise(m: np.ndarray, window: int = 201, lag: int = 4) -> np.ndarray:
     return 1.4826 * median_filter(d, size=int(window), mode="nearest") / np.sqrt(1.5)
 
 
-class ResonanceProxy(ap.Approach):
+class _SumOfSquares(ap.Approach):
+    """An approach whose cost is the sum of squares of its ``_residuals`` (non-finite ones count as 10)."""
+
+    def _costs(self, ev: Any) -> np.ndarray:
+        r = self._residuals(ev)
+        return np.sum(np.where(np.isfinite(r), r, 10.0) ** 2, axis=1)
+
+
+class ResonanceProxy(_SumOfSquares):
     """First-stage cost of the frequency path: analytic log-magnitude residuals plus resonance-frequency residuals.
 
     Parameters
@@ -351,12 +359,8 @@ class ResonanceProxy(ap.Approach):
         r_m = self.guide._residuals(ev)[:, : self.guide.f_t.size]
         return np.concatenate([self.proxy._residuals(ev), self.weight * r_m], axis=1)
 
-    def _costs(self, ev: Any) -> np.ndarray:
-        r = self._residuals(ev)
-        return np.sum(np.where(np.isfinite(r), r, 10.0) ** 2, axis=1)
 
-
-class ModeConstrained(ap.Approach):
+class ModeConstrained(_SumOfSquares):
     """An approach's residuals with the modal frequency residuals appended (a soft constraint on the modes).
 
     Least squares on these stays near the measured mode frequencies while the
@@ -386,12 +390,8 @@ class ModeConstrained(ap.Approach):
         r_f = self.guide._residuals(ev)[:, : self.guide.f_t.size]
         return np.concatenate([self.own._residuals(ev) / self.scale, self.weight * r_f], axis=1)
 
-    def _costs(self, ev: Any) -> np.ndarray:
-        r = self._residuals(ev)
-        return np.sum(np.where(np.isfinite(r), r, 10.0) ** 2, axis=1)
 
-
-class Weighted(ap.Approach):
+class Weighted(_SumOfSquares):
     """An approach's residuals multiplied by fixed weights (weighted least squares).
 
     Parameters
@@ -413,12 +413,8 @@ class Weighted(ap.Approach):
     def _residuals(self, ev: Any) -> np.ndarray:
         return self.inner._residuals(ev) * self.weights
 
-    def _costs(self, ev: Any) -> np.ndarray:
-        r = self._residuals(ev)
-        return np.sum(np.where(np.isfinite(r), r, 10.0) ** 2, axis=1)
 
-
-class Shifted(ap.Approach):
+class Shifted(_SumOfSquares):
     """An approach's residuals plus a fixed offset (the output space-mapping correction of a proxy).
 
     A cheap proxy (the analytic ``Zin``) and the fine model it stands for (the
@@ -446,10 +442,6 @@ class Shifted(ap.Approach):
 
     def _residuals(self, ev: Any) -> np.ndarray:
         return self.inner._residuals(ev) + self.offset[None, :]
-
-    def _costs(self, ev: Any) -> np.ndarray:
-        r = self._residuals(ev)
-        return np.sum(np.where(np.isfinite(r), r, 10.0) ** 2, axis=1)
 
 
 class Box:
