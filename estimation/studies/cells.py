@@ -30,8 +30,12 @@ SUCCESS_PERCENT = 5.0
 
 
 def add_noise(waveforms: Mapping[str, np.ndarray], snr_db: float | None, seed: int,
-              names: Sequence[str] = ("v_in", "i_in")) -> dict[str, np.ndarray]:
+              names: Sequence[str] = ("v_in", "i_in"), averages: int = 1) -> dict[str, np.ndarray]:
     """Copy of ``waveforms`` with white Gaussian noise on ``names`` at ``snr_db``.
+
+    With ``averages`` above 1 the copy is the mean of that many acquisitions of
+    the same waveforms, each with its own noise at ``snr_db`` (a triggered,
+    averaged record: the noise's standard deviation falls by ``sqrt(averages)``).
 
     Parameters
     ----------
@@ -45,6 +49,8 @@ def add_noise(waveforms: Mapping[str, np.ndarray], snr_db: float | None, seed: i
         Seed of the noise generator.
     names : sequence of str
         Waveforms that receive noise (others are copied unchanged).
+    averages : int, optional
+        Acquisitions averaged (default 1: one noisy record).
 
     Returns
     -------
@@ -58,7 +64,7 @@ def add_noise(waveforms: Mapping[str, np.ndarray], snr_db: float | None, seed: i
         if k in out:
             x = out[k]
             sigma = float(np.std(x)) * 10.0 ** (-float(snr_db) / 20.0)
-            out[k] = x + sigma * rng.standard_normal(x.shape)
+            out[k] = x + sigma * rng.standard_normal((max(int(averages), 1),) + x.shape).mean(axis=0)
     return out
 
 

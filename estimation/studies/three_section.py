@@ -71,7 +71,9 @@ at its SNR (:func:`cell_bound`, :mod:`estimation.studies.bounds`) and
 succeeds when every parameter is within ``max(5 %, 3 x bound)``.
 
 Statistics (``seeds``), noise (``snr_db``: white Gaussian noise on the
-target waveforms, :func:`estimation.studies.cells.add_noise`) and the
+target waveforms, :func:`estimation.studies.cells.add_noise`; the time paths'
+record is :data:`TIME_AVERAGES` triggered acquisitions of one PRBS6 period,
+averaged, the size of the frequency path's record) and the
 Fisher information of each approach's data at the target
 (:func:`estimation.studies.cells.fisher_information`, the Cramer-Rao bound
 on each parameter's relative standard deviation; parameters above 5 % are
@@ -119,6 +121,10 @@ SOURCE_FRF = SourceSettings(vdc=100.0, prbs_order=12, fclk=100e3, rpris=150.0, l
 SOURCE_TIME = SourceSettings(vdc=100.0, prbs_order=6, fclk=100e3, rpris=150.0, lpris=4e-3, cpris=1e-6)
 FS_FRF = 2.5e6
 FS_TIME = 11e6
+#: Acquisitions of the time paths' record under noise, each one PRBS6 period from rest with its own noise,
+#: averaged as an oscilloscope's averaging mode does: 16 x 6,930 samples, about the 102,375 samples of the
+#: frequency path's single PRBS12 period, so that both paths see the same amount of data.
+TIME_AVERAGES = 16
 F_MIN, F_MAX, N_POINTS = 2e3, 1e6, 200
 APPROACHES = ["frequency", "time", "emd", "iemd"]
 #: Resonance peaks of the target's Zin used by the frequency path's first stage: prominence (decades),
@@ -218,9 +224,10 @@ def frequency_target(snr_db: float | None = None, seed: int = 1
 
 
 def time_target(snr_db: float | None = None, seed: int = 1) -> dict[str, np.ndarray]:
-    """Target waveforms: one PRBS6 period at 11 MHz (with noise on ``v_in`` and ``i_in`` at ``snr_db``)."""
+    """Target waveforms: one PRBS6 period at 11 MHz; under noise (``snr_db`` on ``v_in`` and ``i_in`` of each
+    acquisition) the mean of :data:`TIME_AVERAGES` acquisitions."""
     w = td.simulate_pris(get_model(NAME).circuit, PORT, SOURCE_TIME, FS_TIME, periods=1)
-    return cells.add_noise(w, snr_db, _noise_seed(seed))
+    return cells.add_noise(w, snr_db, _noise_seed(seed), averages=TIME_AVERAGES)
 
 
 class _BridgeDrive:
@@ -752,8 +759,8 @@ def cell_bound(approach: str, snr_db: float) -> dict[str, Any]:
     """Cramer-Rao bound (relative one-sigma, %) of each parameter from the data ``approach`` compares at ``snr_db``.
 
     Time, EMD and IEMD: the ``v_in`` record of :func:`time_target` with white noise
-    ``snr_db`` below its RMS (the bridge drive is known exactly, so the current's
-    noise carries no information). Frequency: ``log10 |Zin|`` at the compared bins,
+    ``snr_db`` below its RMS in each of its :data:`TIME_AVERAGES` averaged acquisitions
+    (the bridge drive is known exactly, so the current's noise carries no information). Frequency: ``log10 |Zin|`` at the compared bins,
     each with the spread measured over :data:`BOUND_DRAWS` noise draws on voltage and
     current (:func:`bounds.bin_spread`). See :mod:`estimation.studies.bounds`.
     """
@@ -772,10 +779,11 @@ def cell_bound(approach: str, snr_db: float) -> dict[str, Any]:
                 f"(median {np.median(sd):.3g}, max {np.max(sd):.3g} decades)")
     elif approach in ("time", "emd", "iemd"):
         w = time_target()
-        sigma = bounds.noise_sigma(w["v_in"], snr_db)
+        sigma = bounds.noise_sigma(w["v_in"], snr_db) / math.sqrt(TIME_AVERAGES)
         t = build_approach("time", "rmse", params)
         b = bounds.cramer_rao(t.residuals, params, TARGET, sigma)
-        data = f"v_in, {w['v_in'].size} samples, white noise {sigma:.4g} V RMS"
+        data = (f"v_in, {w['v_in'].size} samples, mean of {TIME_AVERAGES} acquisitions: white noise "
+                f"{sigma:.4g} V RMS")
     else:
         raise common.StudyError(f"three-section approach must be one of {', '.join(APPROACHES)} (got {approach!r})")
     return {"approach": approach, "snr_db": float(snr_db), "bound_percent": b, "data": data}
