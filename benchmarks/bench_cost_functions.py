@@ -1,12 +1,14 @@
 """Cost-function benchmark of the three-section study: every cell over seeds and noise levels.
 
-Run: ``python benchmarks/bench_cost_functions.py [--seeds 3] [--snr-db [none,]60,40,20]
+Run: ``python benchmarks/bench_cost_functions.py [--seeds 3] [--snr-db [none,]60,40,20[,adc]]
 [--optimisers ga,pso,cma] [--approaches frequency,time,emd,iemd] [--full] [--out DIR]``
 
 Every approach (frequency, time, EMD, IEMD) x optimiser (GA, PSO, CMA-ES;
 each followed by the local solver, RMSE-type costs then by a least-squares
 polish) x cost function (RMSE-type, correlation) x noise level (each
-``--snr-db``; ``none`` in the list adds the noise-free cells) is run from ``--seeds`` seeds with the quick budgets
+``--snr-db``; ``none`` in the list adds the noise-free cells, ``adc`` the cell measured through the virtual
+lab's chain: 100 kHz anti-alias filter, 1 MS/s, 16-bit ADC with its noise) is run from ``--seeds`` seeds with the
+quick budgets
 of ``pris-cosim study three-section --quick`` (``--full``: the full ones).
 
 Writes into ``--out`` (default ``bench-cost-functions``):
@@ -50,7 +52,14 @@ except ImportError:  # run as a module from the repository root
 
 
 def _level(r: dict[str, Any]) -> str:
-    return "noise-free" if r.get("snr_db") is None else f"{r['snr_db']:g} dB"
+    lv = r.get("snr_db")
+    return "noise-free" if lv is None else "ADC (1 MS/s, 16 bit)" if three.is_adc(lv) else f"{lv:g} dB"
+
+
+def _level_order(r: dict[str, Any]) -> tuple[int, float]:
+    """Noise-free first, then SNRs from high to low, the ADC cell last."""
+    lv = r.get("snr_db")
+    return (0, 0.0) if lv is None else (2, 0.0) if three.is_adc(lv) else (1, -float(lv))
 
 
 def _num(x: Any, digits: int = 3) -> Any:
@@ -183,7 +192,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--snr-db", default="60,40,20",
-                   help="noise levels, dB; 'none' adds the noise-free cells (e.g. none,60,40,20)")
+                   help="noise levels, dB; 'none' adds the noise-free cells, 'adc' the cell measured through "
+                        "the virtual lab's chain (e.g. none,60,40,20,adc)")
     p.add_argument("--optimisers", default=",".join(three.OPTIMISERS))
     p.add_argument("--approaches", default=",".join(three.APPROACHES))
     p.add_argument("--metrics", default=",".join(three.METRICS))
@@ -196,9 +206,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     items = [x.strip().lower() for x in args.snr_db.split(",") if x.strip()]
     try:
-        levels = [float(x) for x in items if x not in ("none", "clean")]
-    except ValueError:
-        p.error(f"--snr-db takes SNRs in dB and 'none' for the noise-free cells (got {args.snr_db!r})")
+        levels = [three.level_of(x) for x in items if x not in ("none", "clean")]
+    except three.common.StudyError:
+        p.error(f"--snr-db takes SNRs in dB, 'none' for the noise-free cells and 'adc' for the measured "
+                f"cell (got {args.snr_db!r})")
     t0 = time.perf_counter()
     summary = three.run(quick=not args.full, out=args.out, workers=args.workers, seeds=args.seeds,
                         snr_db=levels, optimisers=[o for o in args.optimisers.split(",") if o],
@@ -210,7 +221,7 @@ def main(argv: list[str] | None = None) -> int:
     for d in args.merge:
         rows += json.loads((Path(d) / "study.json").read_text(encoding="utf-8"))["rows"]
     order = {a: i for i, a in enumerate(three.APPROACHES)}
-    rows.sort(key=lambda r: (r.get("snr_db") is not None, -(r.get("snr_db") or 0), order[r["approach"]],
+    rows.sort(key=lambda r: (_level_order(r), order[r["approach"]],
                              r["optimiser"], r["cost_function"]))
     out = Path(args.out)
     lines = csv_rows(rows)

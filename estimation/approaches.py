@@ -227,6 +227,12 @@ class PrisEngine:
     probes : sequence of str, optional
         DUT nodes whose voltages are returned as ``v_<node>`` (default: the
         circuit's probes).
+    output_filter : tuple, optional
+        ``(A, B, C, D)`` of a single-input, single-output analogue filter (B, C as
+        vectors; time in s) that every returned channel passes before it is
+        sampled, as a measurement chain's anti-alias filter does
+        (:func:`pris_cosim.virtual_lab.anti_alias_ss`). Its states are appended to
+        the arrangement's, so the filtered samples are exact.
 
     Notes
     -----
@@ -239,7 +245,8 @@ class PrisEngine:
     """
 
     def __init__(self, dut: Circuit, port: str, settings: SourceSettings, fs: float, n_samples: int,
-                 probes: Sequence[str] | None = None):
+                 probes: Sequence[str] | None = None,
+                 output_filter: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None):
         ratio = float(fs) / float(settings.fclk)
         spb = int(round(ratio))
         if spb < 1 or abs(ratio - spb) > 1e-9 * ratio:
@@ -259,6 +266,7 @@ class PrisEngine:
         self._rows = [self.mna.outputs.index(f"v({p})") for p in nodes]
         self._i_state = self.mna.states.index(f"i({SENSE_INDUCTOR})")
         self.names = ["v_in"] + [f"v_{p}" for p in self.probes] + ["i_in"]
+        self.output_filter = None if output_filter is None else _balanced_filter(output_filter)
 
     @property
     def time_s(self) -> np.ndarray:
@@ -294,6 +302,12 @@ class PrisEngine:
         A = np.where(ok[:, None, None], A, 0.0)
         B = np.where(ok[:, None, None], B, 0.0)
         n = A.shape[1]
+        # outputs: rows of C for the node voltages, and the inductor-current state
+        Cy = np.concatenate([C[:, self._rows, :], np.broadcast_to(np.eye(n)[[self._i_state]], (P, 1, n))], axis=1)
+        Dy = np.concatenate([D[:, self._rows, 0], np.zeros((P, 1))], axis=1)  # (P, ny)
+        if self.output_filter is not None:
+            A, B, Cy, Dy = _filtered_outputs(A, B, Cy, Dy, self.output_filter)
+            n = A.shape[1]
         s = self.spb
         Phi, Gam = _batched_zoh(A, B, 1.0 / self.fs)
         g = Gam[:, :, 0]
@@ -309,9 +323,6 @@ class PrisEngine:
         nb = self.level.size
         with np.errstate(over="ignore", invalid="ignore"):
             starts = _blocked_states(Phi_s, g_s, self.level)  # (P, nb, n): state at the first sample of each bit
-            # outputs: rows of C for the node voltages, and the inductor-current state
-            Cy = np.concatenate([C[:, self._rows, :], np.broadcast_to(np.eye(n)[[self._i_state]], (P, 1, n))], axis=1)
-            Dy = np.concatenate([D[:, self._rows, 0], np.zeros((P, 1))], axis=1)  # (P, ny)
             out = {}
             for k, name in enumerate(self.names):
                 CPk = np.einsum("pn,jpnm->pmj", Cy[:, k], Pw[:s])  # (P, n, s): (c_k Phi^j)^T
@@ -323,6 +334,47 @@ class PrisEngine:
                 out[name] = Yk
         return out
 
+
+
+def _balanced_filter(filt: tuple[Any, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """A SISO ``(A, B, C, D)`` in a diagonally balanced realisation (a companion form of a 100 kHz filter spans
+    twenty decades, which the matrix exponential of the zero-order hold does not survive)."""
+    from scipy.linalg import matrix_balance
+
+    af = np.atleast_2d(np.asarray(filt[0], float))
+    bf, cf = np.ravel(np.asarray(filt[1], float)), np.ravel(np.asarray(filt[2], float))
+    df = float(np.ravel(np.asarray(filt[3], float))[0])
+    if af.shape[0] != af.shape[1] or bf.size != af.shape[0] or cf.size != af.shape[0]:
+        raise ApproachError(f"output_filter: A must be square and B, C of its size (got A {af.shape}, "
+                            f"B {bf.size}, C {cf.size})")
+    ab, t = matrix_balance(af, permute=False)
+    return ab, np.linalg.solve(t, bf), cf @ t, df
+
+
+def _filtered_outputs(A: np.ndarray, B: np.ndarray, Cy: np.ndarray, Dy: np.ndarray,
+                      filt: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Append one copy of the SISO filter ``filt = (af, bf, cf, df)`` per output channel to a batched system.
+
+    ``A (P, n, n)``, ``B (P, n, 1)``, ``Cy (P, ny, n)``, ``Dy (P, ny)``; returns the augmented
+    ``A, B, Cy, Dy`` whose outputs are the filtered channels.
+    """
+    af, bf, cf, df = filt
+    bf, cf, df = np.ravel(bf), np.ravel(cf), float(np.ravel(df)[0])
+    P, n, _ = A.shape
+    ny, nf = Cy.shape[1], af.shape[0]
+    m = n + ny * nf
+    Aa = np.zeros((P, m, m))
+    Ba = np.zeros((P, m, 1))
+    Ca = np.zeros((P, ny, m))
+    Aa[:, :n, :n], Ba[:, :n] = A, B
+    for k in range(ny):
+        sl = slice(n + k * nf, n + (k + 1) * nf)
+        Aa[:, sl, sl] = af
+        Aa[:, sl, :n] = bf[None, :, None] * Cy[:, k, None, :]
+        Ba[:, sl, 0] = bf[None, :] * Dy[:, k, None]
+        Ca[:, k, sl] = cf
+        Ca[:, k, :n] = df * Cy[:, k]
+    return Aa, Ba, Ca, df * Dy
 
 
 class InjectionEngine:

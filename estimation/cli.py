@@ -181,16 +181,19 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
 
 
 def _study_lists(snr_db: str | None, optimisers: str | None, known: list[str]
-                 ) -> tuple[list[float], list[str] | None]:
-    """``--snr-db 60,40,20`` and ``--optimisers pso,cma`` as lists (one-line errors)."""
-    levels: list[float] = []
+                 ) -> tuple[list[float | str], list[str] | None]:
+    """``--snr-db 60,40,20[,adc]`` and ``--optimisers pso,cma`` as lists (one-line errors)."""
+    levels: list[float | str] = []
     for item in (snr_db or "").split(","):
         if not item.strip():
+            continue
+        if item.strip().lower() == "adc":
+            levels.append("adc")
             continue
         try:
             v = float(item)
         except ValueError:
-            raise EstimationInputError(f"--snr-db: {item.strip()!r} is not a number (dB)") from None
+            raise EstimationInputError(f"--snr-db: {item.strip()!r} is not a number (dB) or 'adc'") from None
         if not np.isfinite(v):
             raise EstimationInputError(f"--snr-db: {item.strip()!r} is not a finite number (dB)")
         levels.append(v)
@@ -622,7 +625,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--seeds", type=int, metavar="N", help="three-section: repeat every cell over N seeds "
                    "(rows add success_rate, errors_percent_median, evaluations, evals_per_s)")
     p.add_argument("--snr-db", metavar="LIST", help="three-section: also run with measurement noise on the target "
-                   "waveforms at these SNRs, e.g. 60,40,20")
+                   "waveforms at these SNRs, e.g. 60,40,20; 'adc' adds the cell measured through the virtual "
+                   "lab's anti-alias filter and 16-bit ADC at 1 MS/s")
     p.add_argument("--optimisers", metavar="LIST", help="three-section: comma-separated subset of ga,pso,cma")
     p.add_argument("--cases", metavar="LIST", help="comma-separated subset of the cases: hv-transformer 1,2a,2b,3; "
                    "two-section 1,2,3,4,5")

@@ -75,6 +75,7 @@ __all__ = [
     "LabSettings",
     "MeasurementChain",
     "RESPONSE_OF",
+    "acquire_pris",
     "anti_alias_ss",
     "measure_response",
     "perturb",
@@ -312,48 +313,18 @@ def _noise_rng(seed: int | None, config: str, clock: str) -> np.random.Generator
     return np.random.default_rng(None if seed is None else [int(seed), *key])
 
 
-def perturb(model: Model, config: str, clock: Clock = "high", settings: LabSettings | None = None,
-            seed: int | None = 0, noise: bool = True, keep_true: bool = False) -> LabRecord:
-    """Perturb one test configuration and acquire its waveforms through the measurement chain.
+def _chain_system(circuit: Any, port: str, src: SourceSettings, ch: MeasurementChain, node_out: str | None,
+                  keep_true: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """State space of a PRIS arrangement seen through the chain: ``(A, b, C, d, names)``.
 
-    Parameters
-    ----------
-    model : Model
-        Two-winding model (any model whose configurations yield one impedance or ratio).
-    config : str
-        ``LVOC`` ... ``HVLV``.
-    clock : {"high", "low"}
-        20 kHz clock (PRBS16, or the quick order) or 2 kHz clock (PRBS13).
-    settings : LabSettings, optional
-        Default :class:`LabSettings` (full thesis lengths).
-    seed : int or None
-        Noise seed (the stream also depends on the configuration and clock).
-    noise : bool
-        False: no additive noise and no quantisation (filter and probes kept).
-    keep_true : bool
-        Also return the unfiltered noise-free ``v_in``, ``i_in`` (, ``v_out``).
-
-    Returns
-    -------
-    LabRecord
+    Outputs: the measured channels ``v_in``, ``v_sense`` (= R_pris i) [, ``v_out``], each
+    through its own anti-alias filter (state equations appended), then, with
+    ``keep_true``, the same channels unfiltered.
     """
-    t0 = time.perf_counter()
-    st = settings or LabSettings()
-    ch = st.chain
-    cfg = model.configuration(config)
-    node_out = _ratio_node(cfg)
-    src = st.source(cfg, clock)
-    ratio = ch.fs / src.fclk
-    M = int(round(ratio))
-    if abs(ratio - M) > 1e-9 * ratio or M < 1:
-        raise ValueError(f"fs = {ch.fs:g} Hz must be an integer multiple of the clock {src.fclk:g} Hz")
-    circuit = pris_arrangement(model.circuit, cfg.port, src, cfg.shorts)
-    port = circuit.ports[0]
     mna = MNA(circuit, voltage_inputs=[BRIDGE])
     ss = mna.state_space(checked_values(circuit))
     A, B, C, D = ss.A[0], ss.B[0][:, 0], ss.C[0], ss.D[0][:, 0]
     n = A.shape[0]
-    # measured channels as output rows of the circuit: v_in, v_sense (= Rpris i), [v_out]
     rows_c = [C[mna.outputs.index(f"v({port})")]]
     rows_d = [D[mna.outputs.index(f"v({port})")]]
     e_i = np.zeros(n)
@@ -391,33 +362,141 @@ def perturb(model: Model, config: str, clock: Clock = "high", settings: LabSetti
         pad = np.zeros((nch, Aa.shape[0]))
         pad[:, :n] = Cr
         Co, do = np.vstack([Co, pad]), np.concatenate([do, dr])
-    nbits_period = 2 ** src.prbs_order - 1
-    bits = lfsr_prbs(src.prbs_order, st.periods)
+    return Aa, ba, Co, do, names
+
+
+def _digitise(y: np.ndarray, ch: MeasurementChain, rng: np.random.Generator, noise: bool, averages: int = 1
+              ) -> tuple[np.ndarray, float, int]:
+    """One channel through probe, noise and ADC: ``(samples at the probe tip, attenuation, clipped count)``.
+
+    The probe's attenuation is the smallest keeping the peak within the headroom; with
+    ``averages`` above 1 that many acquisitions, each with its own noise and
+    quantisation, are averaged (an oscilloscope's averaging mode).
+    """
+    peak = float(np.max(np.abs(y)))
+    a = next((x for x in sorted(ch.probe_attenuations) if peak / x <= ch.headroom * ch.adc_range_v),
+             max(ch.probe_attenuations))
+    acc = np.zeros(y.size)
+    clipped = 0
+    for _ in range(max(int(averages), 1)):
+        v = y / a
+        if noise and ch.noise_rms_v > 0:
+            v = v + rng.normal(0.0, ch.noise_rms_v, y.size)
+        if noise and ch.quantise:
+            top = 2 ** (ch.adc_bits - 1)
+            q = np.round(v / ch.lsb_v)
+            clipped += int(np.count_nonzero((q < -top) | (q > top - 1)))
+            v = np.clip(q, -top, top - 1) * ch.lsb_v
+        acc += v
+    return acc / max(int(averages), 1) * a, a, clipped
+
+
+def _chain_run(circuit: Any, port: str, src: SourceSettings, ch: MeasurementChain, node_out: str | None,
+               keep_true: bool, periods: int, start: str) -> tuple[np.ndarray, np.ndarray, list[str], int]:
+    ratio = ch.fs / src.fclk
+    M = int(round(ratio))
+    if abs(ratio - M) > 1e-9 * ratio or M < 1:
+        raise ValueError(f"fs = {ch.fs:g} Hz must be an integer multiple of the clock {src.fclk:g} Hz")
+    if start not in ("steady", "rest"):
+        raise ValueError(f"start must be 'steady' or 'rest', got {start!r}")
+    Aa, ba, Co, do, names = _chain_system(circuit, port, src, ch, node_out, keep_true)
+    bits = lfsr_prbs(src.prbs_order, periods)
     levels = np.where(bits == 1, src.vdc, -src.vdc).astype(float)
     Y = _simulate_outputs(Aa, ba, Co, do, levels, M, 1.0 / ch.fs, None,
-                          nbits_period if st.start == "steady" else None)
+                          2 ** src.prbs_order - 1 if start == "steady" else None)
+    return Y, np.repeat(levels, M), names, M
+
+
+def acquire_pris(dut: Any, port: str, source: SourceSettings, chain: MeasurementChain | None = None,
+                 periods: int = 1, start: Literal["steady", "rest"] = "rest", seed: int | None = 0,
+                 noise: bool = True, averages: int = 1) -> dict[str, np.ndarray]:
+    """A PRIS record of any one-port winding ``dut`` at ``port``, acquired through the measurement chain.
+
+    The arrangement (:func:`pris_cosim.arrangement.pris_arrangement`) with the
+    anti-alias filter's states appended is stepped exactly (zero-order hold at
+    the ADC's instants, where the bridge switches); each channel then passes the
+    probe, the additive noise and the ADC (:class:`MeasurementChain`).
+
+    Parameters
+    ----------
+    dut : Circuit
+        The winding.
+    port : str
+        Its driven node.
+    source : SourceSettings
+        PRIS source; the ADC rate must be an integer multiple of its clock.
+    chain : MeasurementChain, optional
+        Default :class:`MeasurementChain` (1 MS/s, 100 kHz Chebyshev-I, 16 bit, 5 mV RMS).
+    periods : int
+        PRBS periods recorded.
+    start : {"rest", "steady"}
+        Zero initial state, or the periodic steady state of the drive.
+    seed : int or None
+        Noise seed.
+    noise : bool
+        False: no noise and no quantisation (filter and probes kept).
+    averages : int
+        Acquisitions averaged (each with its own noise and quantisation).
+
+    Returns
+    -------
+    dict
+        ``time_s`` (s), ``v_bprbs``, ``v_in``, ``v_sense`` (V), ``i_in`` (A, ``v_sense / R_pris``),
+        and ``attenuation_v_in``, ``attenuation_v_sense`` (probe ratios, as 0-d arrays).
+    """
+    ch = chain or MeasurementChain()
+    circuit = pris_arrangement(dut, port, source)
+    Y, vb, names, _ = _chain_run(circuit, circuit.ports[0], source, ch, None, False, periods, start)
+    rng = np.random.default_rng(seed)
+    out: dict[str, np.ndarray] = {"time_s": np.arange(Y.shape[0]) / ch.fs, "v_bprbs": vb}
+    for k, name in enumerate(names):
+        out[name], a, _ = _digitise(Y[:, k], ch, rng, noise, averages)
+        out[f"attenuation_{name}"] = np.asarray(a)
+    out["i_in"] = out["v_sense"] / source.rpris
+    return out
+
+
+def perturb(model: Model, config: str, clock: Clock = "high", settings: LabSettings | None = None,
+            seed: int | None = 0, noise: bool = True, keep_true: bool = False) -> LabRecord:
+    """Perturb one test configuration and acquire its waveforms through the measurement chain.
+
+    Parameters
+    ----------
+    model : Model
+        Two-winding model (any model whose configurations yield one impedance or ratio).
+    config : str
+        ``LVOC`` ... ``HVLV``.
+    clock : {"high", "low"}
+        20 kHz clock (PRBS16, or the quick order) or 2 kHz clock (PRBS13).
+    settings : LabSettings, optional
+        Default :class:`LabSettings` (full thesis lengths).
+    seed : int or None
+        Noise seed (the stream also depends on the configuration and clock).
+    noise : bool
+        False: no additive noise and no quantisation (filter and probes kept).
+    keep_true : bool
+        Also return the unfiltered noise-free ``v_in``, ``i_in`` (, ``v_out``).
+
+    Returns
+    -------
+    LabRecord
+    """
+    t0 = time.perf_counter()
+    st = settings or LabSettings()
+    ch = st.chain
+    cfg = model.configuration(config)
+    node_out = _ratio_node(cfg)
+    src = st.source(cfg, clock)
+    circuit = pris_arrangement(model.circuit, cfg.port, src, cfg.shorts)
+    Y, vb, names, _ = _chain_run(circuit, circuit.ports[0], src, ch, node_out, keep_true, st.periods, st.start)
+    nch = len(names)
     K = Y.shape[0]
     rng = _noise_rng(seed, cfg.name, clock)
     measured: dict[str, np.ndarray] = {}
     atten: dict[str, float] = {}
     clipped: dict[str, int] = {}
     for k, name in enumerate(names):
-        y = Y[:, k]
-        peak = float(np.max(np.abs(y)))
-        a = next((x for x in sorted(ch.probe_attenuations) if peak / x <= ch.headroom * ch.adc_range_v),
-                 max(ch.probe_attenuations))
-        atten[name] = a
-        v = y / a
-        if noise and ch.noise_rms_v > 0:
-            v = v + rng.normal(0.0, ch.noise_rms_v, K)
-        if noise and ch.quantise:
-            top = 2 ** (ch.adc_bits - 1)
-            q = np.round(v / ch.lsb_v)
-            clipped[name] = int(np.count_nonzero((q < -top) | (q > top - 1)))
-            v = np.clip(q, -top, top - 1) * ch.lsb_v
-        else:
-            clipped[name] = 0
-        measured[name] = v * a
+        measured[name], atten[name], clipped[name] = _digitise(Y[:, k], ch, rng, noise)
     true: dict[str, np.ndarray] = {}
     if keep_true:
         true = {"v_in": Y[:, nch].copy(), "i_in": Y[:, nch + 1] / src.rpris}
@@ -425,7 +504,7 @@ def perturb(model: Model, config: str, clock: Clock = "high", settings: LabSetti
             true["v_out"] = Y[:, nch + 2].copy()
     return LabRecord(
         config=cfg.name, response=cfg.responses[0].name, clock=clock, fs=ch.fs, source=src,
-        time_s=np.arange(K) / ch.fs, v_bprbs=np.repeat(levels, M), v_in=measured["v_in"],
+        time_s=np.arange(K) / ch.fs, v_bprbs=vb, v_in=measured["v_in"],
         i_in=measured["v_sense"] / src.rpris, v_sense=measured["v_sense"], v_out=measured.get("v_out"),
         attenuation=atten, clipped=clipped, true=true, wall_s=time.perf_counter() - t0,
     )

@@ -98,11 +98,12 @@ from typing import Any
 import numpy as np
 
 from pris_cosim import timedomain as td
+from pris_cosim import virtual_lab as vl
 from pris_cosim.arrangement import SourceSettings
 from pris_cosim.models import get_model
 
 from .. import approaches as ap
-from .. import costs
+from .. import costs, local_search
 from ..executor import Task
 from ..optimisers import Budget, minimize
 from ..parameters import ParameterSet
@@ -125,6 +126,65 @@ FS_TIME = 11e6
 #: averaged as an oscilloscope's averaging mode does: 16 x 6,930 samples, about the 102,375 samples of the
 #: frequency path's single PRBS12 period, so that both paths see the same amount of data.
 TIME_AVERAGES = 16
+#: The measured-noise cell (``snr_db="adc"``): both paths' records acquired through the virtual lab's
+#: measurement chain (:func:`pris_cosim.virtual_lab.acquire_pris`): 100 kHz Chebyshev-I anti-alias filter,
+#: 1 MS/s, differential probes, 5 mV RMS at the ADC input, 16 bits. The estimates replay the same filter
+#: (:class:`estimation.approaches.PrisEngine` ``output_filter``) at the ADC's rate.
+ADC = "adc"
+ADC_CHAIN = vl.MeasurementChain()
+#: Highest compared bin of the frequency path at the ADC cell (a fraction of the ADC's Nyquist frequency).
+ADC_FMAX_FRACTION = 0.45
+Level = float | str | None
+
+
+def level_of(x: Any) -> Level:
+    """A noise level as the study keys it: None (noise-free), an SNR in dB, or :data:`ADC`."""
+    if x is None or (isinstance(x, str) and x.strip().lower() in ("none", "clean")):
+        return None
+    if isinstance(x, str) and x.strip().lower() == ADC:
+        return ADC
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise common.StudyError(f"noise level must be an SNR in dB, 'none' or '{ADC}' (got {x!r})") from None
+    if not math.isfinite(v):
+        raise common.StudyError(f"noise level must be finite (got {x!r})")
+    return v
+
+
+def is_adc(level: Level) -> bool:
+    """True for the measured-noise cell (:data:`ADC`)."""
+    return isinstance(level, str) and level == ADC
+
+
+def level_tag(level: Level) -> str:
+    """``clean``, ``snr60`` or ``adc``: the level's part of run and case names."""
+    return "clean" if level is None else ADC if is_adc(level) else f"snr{float(level):g}"
+
+
+def _rate(level: Level, fs: float) -> float:
+    return ADC_CHAIN.fs if is_adc(level) else fs
+
+
+def _filter(level: Level) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+    return vl.anti_alias_ss(ADC_CHAIN) if is_adc(level) and ADC_CHAIN.aa_cutoff_hz else None
+
+
+def _chain_record(source: SourceSettings, seed: int | None, noise: bool = True, averages: int = 1
+                  ) -> dict[str, np.ndarray]:
+    w = vl.acquire_pris(get_model(NAME).circuit, PORT, source, ADC_CHAIN, seed=seed, noise=noise,
+                        averages=averages)
+    return {k: w[k] for k in ("time_s", "v_bprbs", "v_in", "i_in")}
+
+
+def chain_sigma(v_clean: np.ndarray) -> float:
+    """Noise standard deviation of one ADC acquisition of a voltage channel at the probe tip, V: the additive
+    noise and the quantisation (``LSB^2 / 12``) times the probe's attenuation for that waveform's peak."""
+    ch = ADC_CHAIN
+    peak = float(np.max(np.abs(np.asarray(v_clean, float))))
+    a = next((v for v in sorted(ch.probe_attenuations) if peak / v <= ch.headroom * ch.adc_range_v),
+             max(ch.probe_attenuations))
+    return math.sqrt(ch.noise_rms_v ** 2 + (ch.lsb_v ** 2 / 12.0 if ch.quantise else 0.0)) * a
 F_MIN, F_MAX, N_POINTS = 2e3, 1e6, 200
 APPROACHES = ["frequency", "time", "emd", "iemd"]
 #: Resonance peaks of the target's Zin used by the frequency path's first stage: prominence (decades),
@@ -140,6 +200,9 @@ DRIVES = ("bridge", "current")
 FISHER_SNR_DB = 40.0
 #: Oscillatory modes the modal stage matches (the strongest).
 MODAL_MODES = 3
+#: Fewer modes than this in the record (e.g. behind an anti-alias filter) leave the modal stage too
+#: little to match: the optimiser then runs on the approach's own cost, restarted.
+MODAL_MIN_MODES = 2
 #: Subspace identification of the target's modes from its whole record: state order and block rows.
 SUBSPACE_ORDER, SUBSPACE_ROWS = 8, 400
 #: A further mode is kept when its resonance height is at least this fraction of the previous one's.
@@ -203,29 +266,52 @@ def _noise_seed(seed: int) -> int:
 
 
 @functools.lru_cache(maxsize=8)
-def _frequency_record(snr_db: float | None, seed: int) -> dict[str, np.ndarray]:
-    """The frequency path's record: one simulated PRBS12 period with the cell's noise (cached; do not modify)."""
-    w = cells.add_noise(td.simulate_pris(get_model(NAME).circuit, PORT, SOURCE_FRF, FS_FRF, periods=1), snr_db,
-                        _noise_seed(seed))
+def _frequency_record(snr_db: Level, seed: int) -> dict[str, np.ndarray]:
+    """The frequency path's record: one simulated PRBS12 period with the cell's noise (cached; do not modify);
+    at the ADC cell acquired through the measurement chain at 1 MS/s."""
+    if is_adc(snr_db):
+        w = _chain_record(SOURCE_FRF, _noise_seed(seed))
+    else:
+        w = cells.add_noise(td.simulate_pris(get_model(NAME).circuit, PORT, SOURCE_FRF, FS_FRF, periods=1),
+                            snr_db, _noise_seed(seed))
     for v in w.values():
         v.setflags(write=False)
     return w
 
 
-def frequency_target(snr_db: float | None = None, seed: int = 1
+def frequency_fs(snr_db: Level) -> float:
+    """Sampling rate of the frequency path's record at a level, Hz."""
+    return _rate(snr_db, FS_FRF)
+
+
+def frequency_fmax(snr_db: Level) -> float:
+    """Highest compared frequency of the frequency path at a level, Hz."""
+    return min(F_MAX, ADC_FMAX_FRACTION * ADC_CHAIN.fs) if is_adc(snr_db) else F_MAX
+
+
+def frequency_target(snr_db: Level = None, seed: int = 1
                      ) -> tuple[dict[str, np.ndarray], np.ndarray, int, ap.WelchSettings, np.ndarray]:
     """Target Zin from one simulated PRBS12 period (noise on ``v_in`` and ``i_in``), Welch H1 as the thesis."""
     w = _frequency_record(snr_db, seed)
     n = w["time_s"].size
+    fs = frequency_fs(snr_db)
     welch = ap.WelchSettings()
-    bins, f = ap.bin_frequencies(FS_FRF, welch.segment(n), F_MIN, F_MAX, N_POINTS)
-    _, resp, _ = ap.responses_from_waveforms(w, FS_FRF, [ap.ZIN_SPEC["Zin"]], welch, bins)
+    bins, f = ap.bin_frequencies(fs, welch.segment(n), F_MIN, frequency_fmax(snr_db), N_POINTS)
+    _, resp, _ = ap.responses_from_waveforms(w, fs, [ap.ZIN_SPEC["Zin"]], welch, bins)
     return resp, f, n, welch, bins
 
 
-def time_target(snr_db: float | None = None, seed: int = 1) -> dict[str, np.ndarray]:
+def time_fs(snr_db: Level) -> float:
+    """Sampling rate of the time paths' record at a level, Hz."""
+    return _rate(snr_db, FS_TIME)
+
+
+def time_target(snr_db: Level = None, seed: int = 1) -> dict[str, np.ndarray]:
     """Target waveforms: one PRBS6 period at 11 MHz; under noise (``snr_db`` on ``v_in`` and ``i_in`` of each
-    acquisition) the mean of :data:`TIME_AVERAGES` acquisitions."""
+    acquisition) the mean of :data:`TIME_AVERAGES` acquisitions; at the ADC cell, the mean of as many
+    acquisitions through the measurement chain at 1 MS/s."""
+    if is_adc(snr_db):
+        return _chain_record(SOURCE_TIME, _noise_seed(seed), averages=TIME_AVERAGES)
     w = td.simulate_pris(get_model(NAME).circuit, PORT, SOURCE_TIME, FS_TIME, periods=1)
     return cells.add_noise(w, snr_db, _noise_seed(seed), averages=TIME_AVERAGES)
 
@@ -290,7 +376,8 @@ def build_approach(approach: str, metric: str, params: ParameterSet | None = Non
     circuit = get_model(NAME).circuit
     if approach == "frequency":
         target, f, n, welch, bins = frequency_target(snr_db, seed)
-        engine = ap.PrisEngine(circuit, PORT, SOURCE_FRF, FS_FRF, n, probes=[])
+        engine = ap.PrisEngine(circuit, PORT, SOURCE_FRF, frequency_fs(snr_db), n, probes=[],
+                               output_filter=_filter(snr_db))
         cost = ap.frequency_cost("rmse" if metric == "rmse" else "correlation", ["Zin"])
         return ap.SimulatedFrequency(params, engine, [ap.ZIN_SPEC["Zin"]], welch, bins, target, cost, chunk=8)
     if approach in ("time", "emd", "iemd"):
@@ -298,9 +385,13 @@ def build_approach(approach: str, metric: str, params: ParameterSet | None = Non
             raise common.StudyError(f"drive must be one of {', '.join(DRIVES)} (got {drive!r})")
         w = time_target(snr_db, seed)
         if drive == "bridge":
-            eng: Any = ap.PrisEngine(circuit, PORT, SOURCE_TIME, FS_TIME, w["time_s"].size, probes=[])
+            eng: Any = ap.PrisEngine(circuit, PORT, SOURCE_TIME, time_fs(snr_db), w["time_s"].size, probes=[],
+                                     output_filter=_filter(snr_db))
             cls: Any = {"time": BridgeTime, "emd": BridgeEMD, "iemd": BridgeIEMD}[approach]
         else:
+            if is_adc(snr_db):
+                raise common.StudyError("the current drive injects the recorded current; at the ADC cell the "
+                                        "record is filtered, so only the bridge drive applies")
             eng = ap.InjectionEngine(circuit, PORT, w["i_in"], FS_TIME, hold="step")  # thesis 4.2.3: held samples
             cls = {"time": ap.TimeDomain, "emd": ap.EMDApproach, "iemd": ap.IEMDApproach}[approach]
         return cls(params, eng, w["v_in"], metric)
@@ -367,7 +458,7 @@ def run_one(approach: str, optimiser: str, metric: str, quick: bool = True, seed
     row["cpu_s"] = time.process_time() - cpu0
     row["success_5pct"] = cells.success(row["errors_percent"])
     if snr_db is not None:
-        cb = cached_bound(approach, float(snr_db))
+        cb = cached_bound(approach, level_of(snr_db))
         row["bound_percent"] = dict(cb["bound_percent"])
         row["bound_data"] = cb["data"]
         row["limit_percent"] = {k: bounds.limit_percent(row["bound_percent"], k) for k in NAMES}
@@ -394,7 +485,11 @@ def _run_one(approach: str, optimiser: str, metric: str, quick: bool = True, see
     cost_at_target = float(a.cost_batch(u_target[None])[0])
     plan = optimiser_settings(approach, optimiser, quick)
     if approach != "frequency" and drive == "bridge":
-        return _run_modal(a, params, approach, optimiser, metric, quick, seed, snr_db, plan, cost_at_target, t0)
+        guide = modal_guide(params, snr_db, seed)
+        if guide.f_t.size >= MODAL_MIN_MODES:
+            return _run_modal(a, params, approach, optimiser, metric, quick, seed, snr_db, plan, cost_at_target, t0,
+                              guide)
+        return _run_unguided(a, params, approach, optimiser, metric, quick, seed, snr_db, plan, cost_at_target, t0)
     if approach == "frequency" and metric == "rmse":
         from .three_section_frequency import run_frequency_staged
 
@@ -455,10 +550,17 @@ def modal_guide(params: ParameterSet, snr_db: float | None = None, seed: int = 1
     commanded bridge voltage to the terminal voltage (:func:`record_modes`):
     frequencies, damping ratios and residue magnitudes.
     """
-    f, z, r = record_modes(waveforms) if waveforms is not None else _target_modes(snr_db, seed)
-    engine = ap.PrisEngine(get_model(NAME).circuit, PORT, SOURCE_TIME, FS_TIME, 2, probes=[])
+    w = waveforms if waveforms is not None else None
+    f, z, r = record_modes(w) if w is not None else _target_modes(snr_db, seed)
+    fs = _record_fs(w) if w is not None else time_fs(snr_db)
+    engine = ap.PrisEngine(get_model(NAME).circuit, PORT, SOURCE_TIME, fs, 2, probes=[])
     return modal.ModalGuide(params, engine, f, z, damping_weight=MODAL_DAMPING_WEIGHT, residue_target=r,
-                            residue_weight=MODAL_RESIDUE_WEIGHT, fs=FS_TIME)
+                            residue_weight=MODAL_RESIDUE_WEIGHT, fs=fs)
+
+
+def _record_fs(w: dict[str, np.ndarray]) -> float:
+    t = np.asarray(w["time_s"], float)
+    return float(round(1.0 / (t[1] - t[0])))
 
 
 @functools.lru_cache(maxsize=8)
@@ -478,9 +580,11 @@ def record_modes(w: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.n
     ones are noise modes of the subspace model; at 20 dB SNR the 886 kHz mode is
     among them and the stage uses the two it can see).
     """
-    A, b, c, _ = modal.subspace_model(w["v_bprbs"], w["v_in"], SUBSPACE_ORDER, SUBSPACE_ROWS)
-    poles, res = modal.discrete_modes(A, b, c, FS_TIME)
-    return _strongest_modes(poles, res, FS_TIME)
+    fs = _record_fs(w)
+    rows = min(SUBSPACE_ROWS, w["v_in"].size // 6)
+    A, b, c, _ = modal.subspace_model(w["v_bprbs"], w["v_in"], SUBSPACE_ORDER, rows)
+    poles, res = modal.discrete_modes(A, b, c, fs)
+    return _strongest_modes(poles, res, fs)
 
 
 def _strongest_modes(poles: np.ndarray, res: np.ndarray, fs: float, f_max: float | None = None
@@ -502,12 +606,12 @@ def _strongest_modes(poles: np.ndarray, res: np.ndarray, fs: float, f_max: float
 
 
 def _run_modal(a: ap.Approach, params: ParameterSet, approach: str, optimiser: str, metric: str, quick: bool,
-               seed: int, snr_db: float | None, plan: dict[str, Any], cost_at_target: float, t0: float
-               ) -> dict[str, Any]:
+               seed: int, snr_db: Level, plan: dict[str, Any], cost_at_target: float, t0: float,
+               guide: modal.ModalGuide | None = None) -> dict[str, Any]:
     """Time, EMD, IEMD with the bridge drive: modal first stage (the optimiser + local, then least squares),
     then the approach's own cost (least squares on its residuals for RMSE-type time/IEMD costs, the local
     solver otherwise); ``restarts`` seeds, the lowest own cost kept."""
-    guide = modal_guide(params, snr_db, seed)
+    guide = guide if guide is not None else modal_guide(params, snr_db, seed)
     m = plan["modal"]
     own_ls = metric == "rmse" and approach in ("time", "iemd")
     volt = a if approach == "time" and metric == "rmse" else build_approach("time", "rmse", params, snr_db, seed)
@@ -570,10 +674,70 @@ def _run_modal(a: ap.Approach, params: ParameterSet, approach: str, optimiser: s
     }
 
 
+def _run_unguided(a: ap.Approach, params: ParameterSet, approach: str, optimiser: str, metric: str, quick: bool,
+                  seed: int, snr_db: Level, plan: dict[str, Any], cost_at_target: float, t0: float
+                  ) -> dict[str, Any]:
+    """Time, EMD, IEMD when the record shows fewer than :data:`MODAL_MIN_MODES` modes (behind an anti-alias
+    filter): the voltage fit restarted (the optimiser + local, least squares), its sloppiest parameter profiled
+    (:func:`estimation.local_search.profile_scan`), then the approach's own cost as in :func:`_run_modal`."""
+    m = plan["modal"]
+    vplan = optimiser_settings("time", optimiser, quick)  # the voltage fit's budgets, whatever the approach
+    own_ls = metric == "rmse" and approach in ("time", "iemd")
+    volt = a if approach == "time" and metric == "rmse" else build_approach("time", "rmse", params, snr_db, seed)
+    best_x, best_c, nfev, notes = None, math.inf, 0, []
+    for k in range(m["restarts"]):
+        res, _ = common.optimise(volt, vplan["method"], 1000 * seed + k, vplan["budget"], vplan["options"])
+        pol = common.least_squares_polish(volt, res.x, max_nfev=vplan["polish_iterations"],
+                                          max_time_s=vplan["polish_time_s"])
+        nfev += int(res.nfev) + int(pol["nfev"])
+        c = float(volt.cost_batch(np.asarray(pol["x"])[None])[0])
+        notes.append(f"start {k + 1}: voltage cost {c:.4g}")
+        if c < best_c:
+            best_x, best_c = np.asarray(pol["x"]), c
+    assert best_x is not None
+    k_p = local_search.sloppiest_parameter(volt, best_x)
+    prof = local_search.profile_scan(volt, best_x, k_p)
+    nfev += int(prof["nfev"]) + volt.n + 1
+    c_prof = float(volt.cost_batch(np.asarray(prof["x"])[None])[0])
+    notes.append(f"profile of {NAMES[k_p]}: voltage cost {best_c:.4g} -> {min(c_prof, best_c):.4g}")
+    x = np.asarray(prof["x"]) if c_prof < best_c else best_x
+    if a is not volt:
+        if own_ls:
+            p2 = common.least_squares_polish(a, x, max_nfev=plan["polish_iterations"], max_time_s=plan["polish_time_s"])
+            x, n2 = np.asarray(p2["x"]), int(p2["nfev"])
+        else:
+            box = modal.Box(x, LOCAL_BOX)
+            r2 = minimize(lambda U: a.cost_batch(box.to_outer(U)), a.n, method="local", seed=seed,
+                          x0=box.to_inner(x), budget=Budget(max_evals=m["own_local_evals"]),
+                          options={"max_iter": 200})
+            x, n2 = box.to_outer(np.asarray(r2.x)[None])[0], int(r2.nfev)
+        nfev += n2
+    cost = float(a.cost_batch(x[None])[0])
+    values = params.values(x)
+    est = {k: float(values[k]) for k in NAMES}
+    errors = common.errors_percent(est, TARGET)
+    wall = time.perf_counter() - t0
+    second = "" if a is volt else (" -> least squares on the cost's residuals" if own_ls else
+                                    " -> local solver on the cost")
+    method = (f"{m['restarts']} x [{vplan['method']} on the voltage -> least squares]; lowest kept; its sloppiest "
+              f"parameter profiled{second} (fewer than {MODAL_MIN_MODES} modes in the record)")
+    return {
+        "study": NAME, "case": case_key(approach, optimiser, metric, snr_db), "approach": approach,
+        "optimiser": optimiser, "cost_function": metric, "snr_db": snr_db, "drive": "bridge", "engine": a.engine,
+        "errors_percent": errors, "estimate": est, "success": cells.success(errors),
+        "success_rate": float(cells.success(errors)), "within_10pct": int(sum(abs(e) < 10 for e in errors.values())),
+        "non_identifiable": [], "cost": cost, "cost_at_target": cost_at_target, "wall_s": wall, "nfev": nfev,
+        "evaluations": nfev, "evals_per_s": nfev / max(wall, 1e-9), "per_eval_s": a.stats.per_eval_s,
+        "optimiser_message": "; ".join(notes), "method": method, "trace": [[float(nfev), cost]],
+        "settings": {"quick": quick, "seed": seed, "method": method, "restarts": m["restarts"],
+                     "max_evals": plan["budget"].max_evals, "polish_iterations": plan["polish_iterations"]},
+    }
+
+
 def case_key(approach: str, optimiser: str, metric: str, snr_db: float | None = None) -> str:
     """``approach/optimiser/metric`` (the thesis tables' key), with ``@<SNR>dB`` under noise."""
     base = f"{approach}/{optimiser}/{metric}"
-    return base if snr_db is None else f"{base}@{snr_db:g}dB"
+    return base if snr_db is None else f"{base}@{ADC}" if is_adc(snr_db) else f"{base}@{float(snr_db):g}dB"
 
 
 def fisher_task(approach: str) -> dict[str, Any]:
@@ -652,7 +816,7 @@ def tasks(quick: bool = True, seed: int = 1, approaches: Sequence[str] | None = 
     mets = list(metrics) if metrics else METRICS
     out = []
     for snr in snr_db:
-        tag = "clean" if snr is None else f"snr{snr:g}"
+        tag = level_tag(snr)
         for s in range(seed, seed + seeds):
             out += [Task(f"three-section-{a}-{o}-{m}-{tag}-{mode}-seed{s}", run_one,
                          {"approach": a, "optimiser": o, "metric": m, "quick": quick, "seed": s, "snr_db": snr},
@@ -675,9 +839,12 @@ def _attach_sensitivity(rows: list[dict[str, Any]], spaces: Sequence[dict[str, A
         if not fi:
             continue
         snr = r.get("snr_db")
-        scale = 1.0 if snr is None else 10.0 ** ((fi["snr_db"] - snr) / 20.0)
-        at = fi["snr_db"] if snr is None else snr
-        sd = {k: v * scale for k, v in fi["relative_sd_percent"].items()}
+        if is_adc(snr) and "bound_percent" in r:
+            sd, at = dict(r["bound_percent"]), snr
+        else:
+            scale = 1.0 if snr is None or is_adc(snr) else 10.0 ** ((fi["snr_db"] - snr) / 20.0)
+            at = fi["snr_db"] if snr is None or is_adc(snr) else snr
+            sd = {k: v * scale for k, v in fi["relative_sd_percent"].items()}
         r["sensitivity"] = {"fisher_relative_sd_percent": sd, "at_snr_db": at,
                             "relative_sensitivity": fi["relative_sensitivity"], "condition": fi["condition"],
                             "data": fi["data"]}
@@ -712,7 +879,7 @@ def run(quick: bool = True, out: str | None = None, scheduler: str | None = None
     t0 = time.perf_counter()
     if seeds < 1:
         raise common.StudyError(f"--seeds must be at least 1 (got {seeds})")
-    levels: list[float | None] = ([None] if noise_free else []) + [float(x) for x in (snr_db or [])]
+    levels: list[Level] = ([None] if noise_free else []) + [level_of(x) for x in (snr_db or [])]
     if not levels:
         raise common.StudyError("no noise level to run: give an SNR or keep the noise-free cells")
     ts = tasks(quick, seed, approaches, seeds, levels, optimisers, metrics, search)
@@ -745,17 +912,17 @@ BOUND_DRAWS = 24
 
 
 def _log_zin(w: dict[str, np.ndarray], welch: ap.WelchSettings, bins: np.ndarray) -> np.ndarray:
-    _, resp, _ = ap.responses_from_waveforms(w, FS_FRF, [ap.ZIN_SPEC["Zin"]], welch, bins)
+    _, resp, _ = ap.responses_from_waveforms(w, _record_fs(w), [ap.ZIN_SPEC["Zin"]], welch, bins)
     return np.log10(np.maximum(np.abs(resp["Zin"]), 1e-300))
 
 
 @functools.lru_cache(maxsize=16)
-def cached_bound(approach: str, snr_db: float) -> dict[str, Any]:
+def cached_bound(approach: str, snr_db: float | str) -> dict[str, Any]:
     """:func:`cell_bound`, computed once per process (time, EMD and IEMD share one)."""
     return cell_bound("time" if approach in ("emd", "iemd") else approach, snr_db)
 
 
-def cell_bound(approach: str, snr_db: float) -> dict[str, Any]:
+def cell_bound(approach: str, snr_db: float | str) -> dict[str, Any]:
     """Cramer-Rao bound (relative one-sigma, %) of each parameter from the data ``approach`` compares at ``snr_db``.
 
     Time, EMD and IEMD: the ``v_in`` record of :func:`time_target` with white noise
@@ -763,10 +930,17 @@ def cell_bound(approach: str, snr_db: float) -> dict[str, Any]:
     (the bridge drive is known exactly, so the current's noise carries no information). Frequency: ``log10 |Zin|`` at the compared bins,
     each with the spread measured over :data:`BOUND_DRAWS` noise draws on voltage and
     current (:func:`bounds.bin_spread`). See :mod:`estimation.studies.bounds`.
+
+    At the ADC cell (``snr_db="adc"``) the data are the chain's records: time paths with
+    the chain's noise (:func:`chain_sigma`, over :data:`TIME_AVERAGES` acquisitions), the
+    frequency path's bin spread over noisy acquisitions of its record.
     """
     from . import bounds
 
     params = make_params()
+    if is_adc(snr_db):
+        return _adc_bound(approach, params)
+    snr_db = float(snr_db)
     if approach == "frequency":
         circuit = get_model(NAME).circuit
         clean = td.simulate_pris(circuit, PORT, SOURCE_FRF, FS_FRF, periods=1)
@@ -787,3 +961,27 @@ def cell_bound(approach: str, snr_db: float) -> dict[str, Any]:
     else:
         raise common.StudyError(f"three-section approach must be one of {', '.join(APPROACHES)} (got {approach!r})")
     return {"approach": approach, "snr_db": float(snr_db), "bound_percent": b, "data": data}
+
+
+def _adc_bound(approach: str, params: ParameterSet) -> dict[str, Any]:
+    from . import bounds
+
+    if approach == "frequency":
+        clean = _chain_record(SOURCE_FRF, None, noise=False)
+        a = build_approach("frequency", "rmse", params, ADC)
+        sd = bounds.bin_spread(clean, lambda w: _log_zin(w, a.welch, a.bins),
+                               lambda w, s: _chain_record(SOURCE_FRF, s), BOUND_DRAWS)
+        sd = np.maximum(sd, 1e-12)
+        b = bounds.cramer_rao(a.residuals, params, TARGET, sd)
+        data = (f"log10|Zin| at the {a.bins.size} compared bins of the 1 MS/s ADC record; per-bin spread over "
+                f"{BOUND_DRAWS} acquisitions (median {np.median(sd):.3g}, max {np.max(sd):.3g} decades)")
+    elif approach in ("time", "emd", "iemd"):
+        clean = _chain_record(SOURCE_TIME, None, noise=False)
+        sigma = chain_sigma(clean["v_in"]) / math.sqrt(TIME_AVERAGES)
+        t = build_approach("time", "rmse", params, ADC)
+        b = bounds.cramer_rao(t.residuals, params, TARGET, sigma)
+        data = (f"v_in through the anti-alias filter at 1 MS/s, {clean['v_in'].size} samples, mean of "
+                f"{TIME_AVERAGES} acquisitions: noise and quantisation {sigma:.4g} V RMS")
+    else:
+        raise common.StudyError(f"three-section approach must be one of {', '.join(APPROACHES)} (got {approach!r})")
+    return {"approach": approach, "snr_db": ADC, "bound_percent": b, "data": data}

@@ -23,10 +23,10 @@ from pris_cosim.models import get_model
 from .. import approaches as ap
 from ..parameters import ParameterSet
 from . import cells, common, modal
-from .three_section import (BIN_NOISE_FLOOR, F_MAX, F_MIN, FS_FRF, ML_WEIGHT_DRAWS, ML_WEIGHT_FLOOR, NAME, NAMES,
+from .three_section import (BIN_NOISE_FLOOR, F_MIN, FS_FRF, ML_WEIGHT_DRAWS, ML_WEIGHT_FLOOR, NAME, NAMES,
                             PEAK_COUNT, PEAK_NOISE_FACTOR, PEAK_PROMINENCE, PEAK_WEIGHT, PORT, SOURCE_FRF, SUBSPACE_ORDER,
-                            SUBSPACE_ROWS, SUBSPACE_SAMPLES_FRF, TARGET, _frequency_record, _log_zin,
-                            _strongest_modes, case_key)
+                            SUBSPACE_ROWS, SUBSPACE_SAMPLES_FRF, TARGET, Level, _frequency_record, _log_zin,
+                            _strongest_modes, case_key, frequency_fmax, frequency_fs)
 
 
 def analytic_proxy(a: ap.SimulatedFrequency, params: ParameterSet) -> ap.AnalyticFrequency:
@@ -41,22 +41,23 @@ def analytic_proxy(a: ap.SimulatedFrequency, params: ParameterSet) -> ap.Analyti
                                 ap.frequency_cost("rmse", list(a.target)))
 
 
-def frequency_peaks(snr_db: float | None = None, seed: int = 1) -> np.ndarray:
+def frequency_peaks(snr_db: Level = None, seed: int = 1) -> np.ndarray:
     """Resonance frequencies (Hz) of the target's ``Zin``: peaks of its Welch estimate on every bin in the band.
 
     The Welch bins are 49 Hz apart (parabolic refinement between them); the peaks
     agree with the analytic ``Zin``'s to 1e-4..5e-4 (the 200 compared bins are 3 % apart).
     """
     w = _frequency_record(snr_db, seed)
+    fs, fmax = frequency_fs(snr_db), frequency_fmax(snr_db)
     welch = ap.WelchSettings()
     seg = welch.segment(w["time_s"].size)
-    bins = np.arange(int(math.ceil(F_MIN * seg / FS_FRF)), int(F_MAX * seg / FS_FRF) + 1)
-    f, resp, _ = ap.responses_from_waveforms(w, FS_FRF, [ap.ZIN_SPEC["Zin"]], welch, bins)
-    return modal.response_peaks(bins * FS_FRF / seg, resp["Zin"], PEAK_PROMINENCE, PEAK_COUNT,
+    bins = np.arange(int(math.ceil(F_MIN * seg / fs)), int(fmax * seg / fs) + 1)
+    f, resp, _ = ap.responses_from_waveforms(w, fs, [ap.ZIN_SPEC["Zin"]], welch, bins)
+    return modal.response_peaks(bins * fs / seg, resp["Zin"], PEAK_PROMINENCE, PEAK_COUNT,
                                 noise_factor=PEAK_NOISE_FACTOR)
 
 
-def frequency_record_modes(snr_db: float | None = None, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+def frequency_record_modes(snr_db: Level = None, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Mode frequencies (Hz) of the frequency path's record (noisy as the target), from a subspace model.
 
     The first :data:`SUBSPACE_SAMPLES_FRF` samples of the PRBS12 record, from the commanded
@@ -65,14 +66,15 @@ def frequency_record_modes(snr_db: float | None = None, seed: int = 1) -> tuple[
     once the noise dominates the current above about 100 kHz.
     """
     w = _frequency_record(snr_db, seed)
-    n = SUBSPACE_SAMPLES_FRF
-    A, b, c, _ = modal.subspace_model(w["v_bprbs"][:n], w["v_in"][:n], SUBSPACE_ORDER, SUBSPACE_ROWS)
-    poles, res = modal.discrete_modes(A, b, c, FS_FRF)
-    f, z, _ = _strongest_modes(poles, res, FS_FRF, F_MAX)
+    fs = frequency_fs(snr_db)
+    n = int(round(SUBSPACE_SAMPLES_FRF * fs / FS_FRF))
+    A, b, c, _ = modal.subspace_model(w["v_bprbs"][:n], w["v_in"][:n], SUBSPACE_ORDER, min(SUBSPACE_ROWS, n // 6))
+    poles, res = modal.discrete_modes(A, b, c, fs)
+    f, z, _ = _strongest_modes(poles, res, fs, min(frequency_fmax(snr_db), fs / 5))
     return f, z
 
 
-def bin_weights(snr_db: float | None, seed: int, bins: np.ndarray) -> np.ndarray:
+def bin_weights(snr_db: Level, seed: int, bins: np.ndarray) -> np.ndarray:
     """Weights of the compared bins: ``s0 / sqrt(s_k^2 + s0^2)``, ``s_k`` the local noise of the target's
     ``log10 |Zin|`` (:func:`modal.local_noise` over every Welch bin), ``s0`` = :data:`BIN_NOISE_FLOOR` decades.
 
@@ -81,10 +83,11 @@ def bin_weights(snr_db: float | None, seed: int, bins: np.ndarray) -> np.ndarray
     form for independent Gaussian bin errors).
     """
     w = _frequency_record(snr_db, seed)
+    fs = frequency_fs(snr_db)
     welch = ap.WelchSettings()
     seg = welch.segment(w["time_s"].size)
-    fine = np.arange(int(math.ceil(F_MIN * seg / FS_FRF)), int(F_MAX * seg / FS_FRF) + 1)
-    _, resp, _ = ap.responses_from_waveforms(w, FS_FRF, [ap.ZIN_SPEC["Zin"]], welch, fine)
+    fine = np.arange(int(math.ceil(F_MIN * seg / fs)), int(frequency_fmax(snr_db) * seg / fs) + 1)
+    _, resp, _ = ap.responses_from_waveforms(w, fs, [ap.ZIN_SPEC["Zin"]], welch, fine)
     sd = modal.local_noise(np.log10(np.maximum(np.abs(resp["Zin"]), 1e-300)))
     s_k = np.interp(np.asarray(bins, float), fine.astype(float), sd)
     return BIN_NOISE_FLOOR / np.sqrt(s_k ** 2 + BIN_NOISE_FLOOR ** 2)
@@ -145,7 +148,7 @@ def ml_bin_weights(a: ap.SimulatedFrequency, params: ParameterSet, x: np.ndarray
     return wts, bias, note
 
 
-def resonance_proxy(a: ap.SimulatedFrequency, params: ParameterSet, snr_db: float | None = None, seed: int = 1,
+def resonance_proxy(a: ap.SimulatedFrequency, params: ParameterSet, snr_db: Level = None, seed: int = 1,
                     weights: np.ndarray | None = None, offset: np.ndarray | None = None) -> modal.ResonanceProxy:
     """First stage of the frequency path: :func:`analytic_proxy` plus the target's resonance frequencies.
 
@@ -173,7 +176,7 @@ def resonance_proxy(a: ap.SimulatedFrequency, params: ParameterSet, snr_db: floa
 
 
 def run_frequency_staged(a: ap.SimulatedFrequency, params: ParameterSet, optimiser: str, quick: bool, seed: int,
-                          snr_db: float | None, plan: dict[str, Any], cost_at_target: float, t0: float
+                          snr_db: Level, plan: dict[str, Any], cost_at_target: float, t0: float
                           ) -> dict[str, Any]:
     """Frequency path, RMSE: global restarts on the analytic proxy, then the simulated cost's least squares.
 
