@@ -45,6 +45,11 @@ error while writing never leaves a half-written or truncated file behind.
 Numbers are written with Python's shortest round-trip representation, so a
 write followed by a read gives back the same binary values (up to the
 rounding of the polar/dB conversions where those forms are used).
+
+The containers and shared helpers live in :mod:`pris_cosim.measured_core`,
+the formats in :mod:`pris_cosim.measured_response_csv`,
+:mod:`pris_cosim.measured_instruments` and
+:mod:`pris_cosim.measured_waveform_csv`; this module re-exports them all.
 """
 
 from __future__ import annotations
