@@ -11,6 +11,11 @@ import numpy as np
 import pytest
 
 from pris_cosim import measured as M
+from pris_cosim import (
+    measured_instruments,
+    measured_response_csv,
+    measured_waveform_csv,
+)
 from pris_cosim.datafiles import REAL
 from pris_cosim.measured import (
     MeasuredDataError,
@@ -432,7 +437,9 @@ def test_failed_write_leaves_original_intact(tmp_path, monkeypatch, writer):
     target = tmp_path / "target.s1p"
     original = b"original content\n"
     target.write_bytes(original)
-    monkeypatch.setattr(M, "_fmt", _fail_after(25))
+    fmt = _fail_after(25)
+    for module in (measured_response_csv, measured_instruments, measured_waveform_csv):
+        monkeypatch.setattr(module, "_fmt", fmt)  # each writer module formats its own numbers
     with pytest.raises(RuntimeError, match="simulated failure"):
         writer(target, random_responses(n=40))
     assert target.read_bytes() == original
