@@ -64,7 +64,7 @@ def main() -> None:
         figures["quick_checks"] = quick["checks"]
         data = str(root / "quick" / "measured.csv")
         figures["per_eval_ms"] = {c: per_eval_ms(data, c) for c in hv.CASES}
-        print(f"per evaluation (six responses, 151 points, populations of 100): "
+        print("per evaluation (six responses, 151 points, populations of 100): "
               + ", ".join(f"case {c} {v:.2f} ms" for c, v in figures["per_eval_ms"].items()), flush=True)
         print(f"study hv-transformer --quick: {figures['quick_wall_s']:.1f} s (goal 300 s)", flush=True)
         print(quick["table"], flush=True)

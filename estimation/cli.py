@@ -336,7 +336,7 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
             raise EstimationInputError(f"config key {key!r} applies only to a config with 'fmu'")
     from pris_cosim import timedomain as td
     from pris_cosim.arrangement import SourceSettings
-    from pris_cosim.measured import read_response_csv, read_waveform_csv
+    from pris_cosim.measured import read_response_csv
     from pris_cosim.models import get_model
 
     from . import approaches as ap

@@ -49,11 +49,9 @@ import math
 import multiprocessing
 import os
 import re
-import signal
 import socket
 import sys
 import tempfile
-import threading
 import time
 import traceback
 import uuid
