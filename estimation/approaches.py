@@ -244,6 +244,9 @@ class PrisEngine:
     inside a bit are ``Phi^j x_b + g_j u_b`` (one einsum).
     """
 
+    #: the balanced output filter, or None (subclasses that build their own system keep None)
+    output_filter: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
+
     def __init__(self, dut: Circuit, port: str, settings: SourceSettings, fs: float, n_samples: int,
                  probes: Sequence[str] | None = None,
                  output_filter: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None):
