@@ -70,7 +70,7 @@ def frequency_record_modes(snr_db: Level = None, seed: int = 1) -> tuple[np.ndar
     n = int(round(SUBSPACE_SAMPLES_FRF * fs / FS_FRF))
     A, b, c, _ = modal.subspace_model(w["v_bprbs"][:n], w["v_in"][:n], SUBSPACE_ORDER, min(SUBSPACE_ROWS, n // 6))
     poles, res = modal.discrete_modes(A, b, c, fs)
-    f, z, _ = _strongest_modes(poles, res, fs, min(frequency_fmax(snr_db), fs / 5))
+    f, z, _ = _strongest_modes(poles, res, fs, frequency_fmax(snr_db))
     return f, z
 
 
