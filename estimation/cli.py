@@ -569,6 +569,7 @@ def _fit_and_report(cfg: dict[str, Any], approach: Any, params: Any, model: Any,
     if b.get("max_evals") is not None:
         plan["budget"] = Budget(max_evals=max(1, int(b["max_evals"]) // int(plan["restarts"])))
         plan["max_restarts"] = plan["restarts"]  # a stated budget is not exceeded by extra restarts
+        plan["least_squares_starts"] = 0  # nor by the stand-in's least-squares starts
     if "restarts" in b:
         plan["restarts"] = plan["max_restarts"] = int(b["restarts"])
     data = frequency_data(approach) if hasattr(approach, "target") else np.asarray(approach.v_target, float)

@@ -6,16 +6,25 @@ study, thesis Table 4.5; three-section study, Tables 4.9/4.10):
 1. a global search on a cheap, smooth stand-in of the cost -- the analytic
    frequency responses (for time, EMD and IEMD records: against the Welch H1
    responses of the record itself, at the bins where its coherence is at
-   least 0.99) -- a genetic algorithm followed by the local solver
-   (L-BFGS-B), sized to the number of parameters ``n``: population
-   ``max(100, 40 n)`` (at most 300), 100 generations;
+   least 0.99; for a record replayed by its bridge voltage, the arrangement's
+   sampled responses and ringing modes against the record's own map,
+   :mod:`estimation.bridge_response`) -- a genetic algorithm followed by the
+   local solver (L-BFGS-B), sized to the number of parameters ``n``: population
+   ``max(100, 40 n)`` (at most 300), 100 generations; a stand-in that asks for
+   them (``least_squares_starts``, the bridge stand-in: 100) is also descended
+   by Levenberg-Marquardt from that many Latin-hypercube starts at once
+   (40 iterations), the lowest end kept -- the ringing modes of a record sampled
+   below twice their frequency leave one narrow basin per alias branch;
 2. a trust-region least-squares polish on the approach's own residuals
    (Jacobian-scaled, :func:`estimation.local_search.least_squares_polish`,
    ``30 + 10 n`` evaluations of the residuals),
    which moves the weakly sensitive resistances that the summed cost hides;
 3. ``restarts`` independent seeds (3 up to 12 parameters, 2 above), and more
    (up to ``max_restarts``, ``2 restarts + 2``) while fewer than two have
-   brought the residual RMS down to three times the data's noise floor; the
+   brought the residual RMS down to three times the data's noise floor (or,
+   when the best fit shows the data's noise reading to be signal -- modes
+   above the Nyquist frequency --, to the larger of 1.5 times the best RMS and
+   three times its residual's own noise, :func:`estimation.verdict.residual_noise`); the
    lowest own cost is kept and the others tell whether the answer is unique
    (:mod:`estimation.verdict`); when the verdict finds the best one short of
    its minimum (a Gauss-Newton step would still move a parameter), it is
@@ -79,8 +88,8 @@ PEAK_PROMINENCE, PEAK_COUNT, PEAK_WEIGHT = 0.3, 8, 100.0
 LSQ_ITERATIONS = 40
 
 
-def _least_squares_starts(proxy: ap.Approach, x: np.ndarray, f: float, starts: int, seed: int, iterations: int
-                          ) -> tuple[np.ndarray, float, int, str]:
+def _least_squares_starts(proxy: ap.Approach, x: np.ndarray, f: float, starts: int, seed: int, iterations: int,
+                          max_time_s: float | None = None) -> tuple[np.ndarray, float, int, str]:
     """Stage 1's second search: Levenberg-Marquardt on the stand-in's residuals from many starts at once.
 
     The stand-in of a record whose ringing modes lie above the Nyquist
@@ -98,7 +107,7 @@ def _least_squares_starts(proxy: ap.Approach, x: np.ndarray, f: float, starts: i
     from .optimisers import _latin_hypercube
 
     X0 = np.vstack([x[None], _latin_hypercube(np.random.default_rng(seed), int(starts), x.size)])
-    X, c, nfev = batched_least_squares(proxy.residuals, X0, iterations=iterations)
+    X, c, nfev = batched_least_squares(proxy.residuals, X0, iterations=iterations, max_time_s=max_time_s)
     i = int(np.argmin(c))
     if c[i] < f:
         return X[i], float(c[i]), nfev, f"least-squares starts: {starts} + 1, best {c[i]:.4g} (was {f:.4g})"
@@ -201,8 +210,9 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
         msg = r1.message
         starts = int(plan.get("least_squares_starts", getattr(first, "least_squares_starts", 0)))
         if starts > 0:
-            x, f1, n_ms, note = _least_squares_starts(first, x, f1, starts, seed + k, int(plan.get(
-                "least_squares_iterations", LSQ_ITERATIONS)))
+            x, f1, n_ms, note = _least_squares_starts(
+                first, x, f1, starts, seed + k, int(plan.get("least_squares_iterations", LSQ_ITERATIONS)),
+                None if time_limit_s is None else max(1.0, time_limit_s - (time.perf_counter() - t0)))
             n_pol += n_ms
             msg = f"{msg}; {note}"
         if int(plan["polish_iterations"]) > 0:
