@@ -52,7 +52,7 @@ import numpy as np
 from . import approaches as ap
 from .parameters import ParameterSet
 
-__all__ = ["DiscreteBridgeResponse", "bridge_response_proxy", "discrete_response", "model_modes", "record_model",
+__all__ = ["DiscreteBridgeResponse", "bridge_response_proxy", "discrete_response", "may_alias", "model_modes", "record_model",
            "zoh_frequency_response", "zoh_modes"]
 
 
@@ -263,6 +263,7 @@ class DiscreteBridgeResponse(ap.Approach):
     engine = "zoh-bridge-response"
     #: Stage 1 also descends the residuals from this many scattered starts
     #: (:func:`estimation.estimate.run_plan`): one basin per alias branch of the ringing modes.
+    #: :func:`bridge_response_proxy` sets 0 when no circuit of the search space rings above ``fs / 2``.
     least_squares_starts = 100
 
     def __init__(self, params: ParameterSet, engine: Any, frequency_hz: np.ndarray, target: np.ndarray,
@@ -413,4 +414,26 @@ def bridge_response_proxy(params: ParameterSet, engine: Any, channels: dict[str,
             proxy.mode_target = modes if modes[0].size else None
     if proxy.mask.sum() < 10:
         return None
+    proxy.least_squares_starts = (DiscreteBridgeResponse.least_squares_starts
+                                  if may_alias(proxy, params, fs) else 0)
     return proxy
+
+
+def may_alias(proxy: DiscreteBridgeResponse, params: ParameterSet, fs: float, points: int = 256,
+              max_damping: float = 0.05) -> bool:
+    """Whether the search space holds circuits that ring above the Nyquist frequency (alias branches).
+
+    The arrangement's modes at ``points`` Latin-hypercube points of the unit cube (and at its
+    centre): True when any lightly damped one (damping ratio below ``max_damping``) lies above
+    ``fs / 2``. Only then does a mode seen in the samples have several branches, each a basin of
+    the stand-in, and stage 1 needs its least-squares starts.
+    """
+    from .optimisers import _latin_hypercube
+
+    n = len(params.varying)
+    U = np.vstack([np.full((1, n), 0.5), _latin_hypercube(np.random.default_rng(0), points, n)])
+    A, _, _, _, ok = proxy._state_space(params.evaluate(U).overrides)
+    with np.errstate(all="ignore"):
+        lam = np.linalg.eigvals(A[ok])
+        zeta = -lam.real / np.abs(lam)
+    return bool(np.any((lam.imag / (2 * np.pi) > 0.5 * fs) & (zeta < max_damping)))

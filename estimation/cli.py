@@ -529,6 +529,11 @@ def _time_approach(name: str, params: Any, model: Any, conf: Any, source: Any, f
         cls: Any = {"time": es.RecordTime, "emd": es.RecordEMD, "iemd": es.RecordIEMD}[name]
         approach = cls(params, eng, v_in, m, chunk=16)
         approach.probe_targets = dict(probes)
+        from .bridge_response import bridge_response_proxy
+
+        proxy = bridge_response_proxy(params, eng, {"v_in": v_in, **probes}, fmin, fmax)
+        if proxy is not None:
+            return approach, proxy
     elif v_bprbs is not None:
         from .drives import RecordBridgeEngine
 
