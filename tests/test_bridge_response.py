@@ -10,8 +10,14 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from estimation.bridge_response import (discrete_response, match_modes, model_modes, record_model,
-                                        zoh_frequency_response, zoh_modes)
+from estimation.bridge_response import (
+    discrete_response,
+    match_modes,
+    model_modes,
+    record_model,
+    zoh_frequency_response,
+    zoh_modes,
+)
 from estimation.local_search import batched_least_squares
 
 
