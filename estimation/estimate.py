@@ -11,7 +11,9 @@ study, thesis Table 4.5; three-section study, Tables 4.9/4.10):
    :mod:`estimation.bridge_response`) -- a genetic algorithm followed by the
    local solver (L-BFGS-B), sized to the number of parameters ``n``: population
    ``max(100, 40 n)`` (at most 300), 100 generations; a stand-in that asks for
-   them (``least_squares_starts``, the bridge stand-in: 100) is also descended
+   them (``least_squares_starts``; its cost the sum of squares of its residuals;
+   the bridge stand-in: 100 when a circuit of the search space rings above
+   ``fs / 2``) is also descended
    by Levenberg-Marquardt from that many Latin-hypercube starts at once
    (40 iterations), the lowest end kept -- the ringing modes of a record sampled
    below twice their frequency leave one narrow basin per alias branch;
