@@ -510,7 +510,11 @@ def _frequency_from_record(name: str, params: Any, model: Any, conf: Any, source
 def _time_approach(name: str, params: Any, model: Any, conf: Any, source: Any, fs: float, i_in: np.ndarray,
                    v_in: np.ndarray, kind: str, metric: str, fmin: float, fmax: float,
                    probes: dict[str, np.ndarray], v_bprbs: np.ndarray | None = None) -> tuple[Any, Any]:
-    """Time/EMD/IEMD approach and its stage-1 stand-in (:func:`estimation.estimate.waveform_proxy`).
+    """Time/EMD/IEMD approach and its stage-1 stand-in.
+
+    The stand-in of a record replayed by its bridge voltage is the arrangement's sampled (zero-order
+    hold) response against the record's own map from ``v_bprbs`` (:mod:`estimation.bridge_response`);
+    otherwise the analytic responses against the record's Welch H1 (:func:`estimation.estimate.waveform_proxy`).
 
     A simulated target is compared with the estimate driven by the same commanded bridge voltage
     through the source's series RLC (exact: the true parameters score zero); a recorded one
@@ -528,6 +532,11 @@ def _time_approach(name: str, params: Any, model: Any, conf: Any, source: Any, f
         cls: Any = {"time": es.RecordTime, "emd": es.RecordEMD, "iemd": es.RecordIEMD}[name]
         approach = cls(params, eng, v_in, m, chunk=16)
         approach.probe_targets = dict(probes)
+        from .bridge_response import bridge_response_proxy
+
+        proxy = bridge_response_proxy(params, eng, {"v_in": v_in, **probes}, fmin, fmax)
+        if proxy is not None:
+            return approach, proxy
     elif v_bprbs is not None:
         from .drives import RecordBridgeEngine
 
@@ -536,6 +545,12 @@ def _time_approach(name: str, params: Any, model: Any, conf: Any, source: Any, f
         approach = cls(params, eng, v_in, m, chunk=16)
         approach.probe_targets = dict(probes)
         approach.engine = approach.engine.replace("zoh-bridge", "recorded-bridge")
+        from .bridge_response import bridge_response_proxy
+
+        # the record's own sampled map from the bridge voltage: no aliasing bias (estimation.bridge_response)
+        proxy = bridge_response_proxy(params, eng, {"v_in": v_in, **probes}, fmin, fmax)
+        if proxy is not None:
+            return approach, proxy
     else:
         eng = ap.InjectionEngine(model.circuit, conf.port, i_in, fs, hold="linear")
         cls = {"time": ap.TimeDomain, "emd": ap.EMDApproach, "iemd": ap.IEMDApproach}[name]
@@ -562,6 +577,7 @@ def _fit_and_report(cfg: dict[str, Any], approach: Any, params: Any, model: Any,
     if b.get("max_evals") is not None:
         plan["budget"] = Budget(max_evals=max(1, int(b["max_evals"]) // int(plan["restarts"])))
         plan["max_restarts"] = plan["restarts"]  # a stated budget is not exceeded by extra restarts
+        plan["least_squares_starts"] = 0  # nor by the stand-in's least-squares starts
     if "restarts" in b:
         plan["restarts"] = plan["max_restarts"] = int(b["restarts"])
     data = frequency_data(approach) if hasattr(approach, "target") else np.asarray(approach.v_target, float)

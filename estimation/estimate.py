@@ -6,16 +6,27 @@ study, thesis Table 4.5; three-section study, Tables 4.9/4.10):
 1. a global search on a cheap, smooth stand-in of the cost -- the analytic
    frequency responses (for time, EMD and IEMD records: against the Welch H1
    responses of the record itself, at the bins where its coherence is at
-   least 0.99) -- a genetic algorithm followed by the local solver
-   (L-BFGS-B), sized to the number of parameters ``n``: population
-   ``max(100, 40 n)`` (at most 300), 100 generations;
+   least 0.99; for a record replayed by its bridge voltage, the arrangement's
+   sampled responses and ringing modes against the record's own map,
+   :mod:`estimation.bridge_response`) -- a genetic algorithm followed by the
+   local solver (L-BFGS-B), sized to the number of parameters ``n``: population
+   ``max(100, 40 n)`` (at most 300), 100 generations; a stand-in that asks for
+   them (``least_squares_starts``; its cost the sum of squares of its residuals;
+   the bridge stand-in: 100 when a circuit of the search space rings above
+   ``fs / 2``) is also descended
+   by Levenberg-Marquardt from that many Latin-hypercube starts at once
+   (40 iterations), the lowest end kept -- the ringing modes of a record sampled
+   below twice their frequency leave one narrow basin per alias branch;
 2. a trust-region least-squares polish on the approach's own residuals
    (Jacobian-scaled, :func:`estimation.local_search.least_squares_polish`,
    ``30 + 10 n`` evaluations of the residuals),
    which moves the weakly sensitive resistances that the summed cost hides;
 3. ``restarts`` independent seeds (3 up to 12 parameters, 2 above), and more
    (up to ``max_restarts``, ``2 restarts + 2``) while fewer than two have
-   brought the residual RMS down to three times the data's noise floor; the
+   brought the residual RMS down to three times the data's noise floor (or,
+   when the best fit shows the data's noise reading to be signal -- modes
+   above the Nyquist frequency --, to the larger of 1.5 times the best RMS and
+   three times its residual's own noise, :func:`estimation.verdict.residual_noise`); the
    lowest own cost is kept and the others tell whether the answer is unique
    (:mod:`estimation.verdict`); when the verdict finds the best one short of
    its minimum (a Gauss-Newton step would still move a parameter), it is
@@ -41,7 +52,7 @@ import numpy as np
 from . import approaches as ap
 from .optimisers import Budget, minimize
 from .parameters import ParameterSet
-from .verdict import residual_tolerance, verdict
+from .verdict import agreement_tolerance, residual_noise, residual_tolerance, verdict
 
 #: Ties assumed when a config names neither parameters nor ties: the thesis's estimation vectors
 #: (two-section 4.1.3: R2 = R1, C2 = C1) and, for the 4-section cascade, the uniform winding of the
@@ -73,6 +84,36 @@ COHERENCE_MIN = 0.99
 #: Resonance stage of a frequency-response target: smallest prominence of a peak of log10 |Zin|
 #: (decades), at most this many peaks, weight of their log-frequency residuals.
 PEAK_PROMINENCE, PEAK_COUNT, PEAK_WEIGHT = 0.3, 8, 100.0
+
+
+#: Levenberg-Marquardt iterations of each stage-1 least-squares start (:func:`_least_squares_starts`).
+LSQ_ITERATIONS = 40
+
+
+def _least_squares_starts(proxy: ap.Approach, x: np.ndarray, f: float, starts: int, seed: int, iterations: int,
+                          max_time_s: float | None = None) -> tuple[np.ndarray, float, int, str]:
+    """Stage 1's second search: Levenberg-Marquardt on the stand-in's residuals from many starts at once.
+
+    The stand-in of a record whose ringing modes lie above the Nyquist
+    frequency has a narrow basin per alias branch of those modes (a mode at
+    ``f`` and one at ``k fs +- f`` ring alike in the samples); a population
+    method settles in one branch. ``starts`` Latin-hypercube points and the
+    global search's answer are each descended (:func:`estimation.local_search.batched_least_squares`);
+    the lowest end replaces the answer when it is lower.
+
+    Returns
+    -------
+    x, cost, evaluations, note
+    """
+    from .local_search import batched_least_squares
+    from .optimisers import _latin_hypercube
+
+    X0 = np.vstack([x[None], _latin_hypercube(np.random.default_rng(seed), int(starts), x.size)])
+    X, c, nfev = batched_least_squares(proxy.residuals, X0, iterations=iterations, max_time_s=max_time_s)
+    i = int(np.argmin(c))
+    if c[i] < f:
+        return X[i], float(c[i]), nfev, f"least-squares starts: {starts} + 1, best {c[i]:.4g} (was {f:.4g})"
+    return x, f, nfev, f"least-squares starts: {starts} + 1, none below {f:.4g}"
 
 
 def default_plan(n: int, per_eval_s: float | None = None) -> dict[str, Any]:
@@ -152,12 +193,13 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
     stages: list[dict[str, Any]] = []
     nfev = 0
     best_x, best_c, message = None, math.inf, ""
-    floor = residual_tolerance(data, noise)[2]  # the verdict's own "explains the data" level
+    noise0, scale0, floor = residual_tolerance(data, noise)  # the verdict's own "explains the data" level
+    reach = floor  # the level two restarts must reach (the best restart's own noise when the data's is signal)
     more = int(plan.get("max_restarts", plan["restarts"]))
     for k in range(max(int(plan["restarts"]), more)):
         if time_limit_s is not None and k > 0 and time.perf_counter() - t0 > time_limit_s:
             break
-        if k >= int(plan["restarts"]) and sum(e[1] <= floor for e in ends) >= 2:
+        if k >= int(plan["restarts"]) and sum(e[1] <= reach for e in ends) >= 2:
             break  # two restarts reached the noise floor (and can tell whether the answer is unique)
         budget = plan["budget"]
         if time_limit_s is not None:
@@ -166,19 +208,31 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
         r1 = minimize(first.cost_batch, first.n, method=plan["method"], seed=seed + k, budget=budget,
                       options=dict(plan["options"]))
         x = np.asarray(r1.x, float)
-        n_pol = 0
+        n_pol, f1 = 0, float(r1.fun)
         msg = r1.message
+        starts = int(plan.get("least_squares_starts", getattr(first, "least_squares_starts", 0)))
+        if starts > 0:
+            x, f1, n_ms, note = _least_squares_starts(
+                first, x, f1, starts, seed + k, int(plan.get("least_squares_iterations", LSQ_ITERATIONS)),
+                None if time_limit_s is None else max(1.0, time_limit_s - (time.perf_counter() - t0)))
+            n_pol += n_ms
+            msg = f"{msg}; {note}"
         if int(plan["polish_iterations"]) > 0:
             pol = least_squares_polish(approach, x, max_nfev=int(plan["polish_iterations"]),
                                        max_time_s=None if time_limit_s is None
                                        else max(1.0, time_limit_s - (time.perf_counter() - t0)))
             x, n_pol = np.asarray(pol["x"], float), int(pol["nfev"])
-            msg = f"{r1.message}; then least squares: {pol['message']}"
+            msg = f"{msg}; then least squares: {pol['message']}"
         c = float(approach.cost_batch(x[None])[0])
         nfev += int(r1.nfev) + n_pol + 1
-        rms = _rms(approach, x)
+        res = np.asarray(approach.residuals(x[None]), float)[0]
+        rms = float(np.sqrt(np.mean(res ** 2))) if res.size and np.all(np.isfinite(res)) else math.inf
         ends.append((x, rms))
-        stages.append({"restart": k + 1, "seed": seed + k, "stage1_cost": float(r1.fun), "cost": c,
+        if noise is None and rms <= min(e[1] for e in ends):
+            # the data's noise reading may be signal (modes above the Nyquist frequency): the best fit's tells
+            sigma = residual_noise(noise0, res)
+            reach = floor if not sigma < noise0 else max(1.5 * rms, agreement_tolerance(floor, noise0, sigma, scale0))
+        stages.append({"restart": k + 1, "seed": seed + k, "stage1_cost": f1, "cost": c,
                        "residual_rms": rms, "evaluations": int(r1.nfev) + n_pol + 1})
         if progress:
             print(f"estimate: restart {k + 1}/{plan['restarts'] if k < int(plan['restarts']) else more}: cost {c:.4g} (residual RMS {rms:.3g}), "

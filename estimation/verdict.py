@@ -74,6 +74,44 @@ def residual_tolerance(data: np.ndarray, noise: float | None = None, scale: floa
     return noise, scale, max(3.0 * noise, 1e-6 * scale, 1e-300)
 
 
+def residual_noise(noise: float, r: np.ndarray, s_res: float | None = None) -> float:
+    """The noise standard deviation to believe: the data's reading, or the fit's residual's when the data's is signal.
+
+    The noise read from the data's fourth differences (:func:`noise_floor`) counts every
+    component near the Nyquist frequency as noise: a record whose modes lie above it
+    (aliased, as the three-section winding sampled at 1 MHz) reads as noisy without any
+    noise. Where the model explains the data, the residual holds the noise and not the
+    signal: when the data's reading exceeds three times both the residual's spread
+    ``s_res`` (default its RMS) and its own reading, it is signal, and the residual's
+    reading is the noise.
+
+    Parameters
+    ----------
+    noise : float
+        The data's reading (unit of the data).
+    r : numpy.ndarray
+        Residual vector of the fit (same unit).
+    s_res : float, optional
+        Spread of the residual.
+    """
+    r = np.asarray(r, float).ravel()
+    if not r.size or not np.all(np.isfinite(r)):
+        return float(noise)
+    n_res = noise_floor(r)
+    spread = float(np.sqrt(np.mean(r ** 2))) if s_res is None else float(s_res)
+    return n_res if noise > 3.0 * max(n_res, spread) else float(noise)
+
+
+def agreement_tolerance(tol: float, noise: float, noise_sigma: float, scale: float) -> float:
+    """Residual RMS within which two fits explain the data equally well.
+
+    The data's tolerance ``tol`` (:func:`residual_tolerance`), or, when the residual showed the
+    data's noise reading to be signal (``noise_sigma < noise``, :func:`residual_noise`),
+    ``max(3 noise_sigma, 1e-6 scale)``: a fit far above the best one's noise does not fit equally well.
+    """
+    return float(tol) if not noise_sigma < noise else max(3.0 * float(noise_sigma), 1e-6 * float(scale), 1e-300)
+
+
 def noise_floor(data: np.ndarray) -> float:
     """Noise standard deviation of a sampled record, from its fourth differences (robust).
 
@@ -225,12 +263,15 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
     at_bound = [k for k, ui in zip(names, u) if ui <= AT_BOUND or ui >= 1 - AT_BOUND]
     if bool(np.any(ev.repaired)):
         at_bound += [k for k in params.couplings + params.mutuals() if k in names and k not in at_bound]
-    # restarts: those reaching the best residual agree?
+    dof = max(1, r.size - len(names))
+    s_res = rms * math.sqrt(r.size / dof) if math.isfinite(rms) else math.inf
+    noise_sigma = noise if noise_given else residual_noise(noise, r, s_res)
+    # restarts: those reaching the best residual (or the noise) agree?
     agreeing, differing, reached = 1, set(), 1
     ends = list(ends)
     if ends:
         best = min(c for _, c in ends)
-        good = [e for e in ends if e[1] <= max(best * 1.5, tol)]
+        good = [e for e in ends if e[1] <= max(best * 1.5, agreement_tolerance(tol, noise, noise_sigma, scale))]
         reached = len(good)
         vals = [{k: float(params.evaluate(np.asarray(e[0], float)).values[k]) for k in names} for e in good]
         agreeing = 0
@@ -245,18 +286,6 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
         reasons.append(f"{', '.join(at_bound)} at a bound")
     if differing:
         reasons.append(f"restarts reach the same cost at different {', '.join(k for k in names if k in differing)}")
-    dof = max(1, r.size - len(names))
-    s_res = rms * math.sqrt(r.size / dof) if math.isfinite(rms) else math.inf
-    # the noise read from the data's fourth differences counts every component near the Nyquist
-    # frequency as noise: a record whose modes lie above it (aliased, as the three-section winding
-    # sampled at 1 MHz) reads as noisy without any noise. Where the model explains the data, the
-    # residual holds the noise and not the signal: when the data's reading exceeds three times both
-    # the residual's spread and its own reading, it is signal, and the residual's reading is the noise.
-    noise_sigma = noise
-    if not noise_given and finite.all() and r.size:
-        n_res = noise_floor(r)
-        if noise > 3.0 * max(n_res, s_res):
-            noise_sigma = n_res
     sigma = max(s_res if math.isfinite(s_res) else 0.0, noise_sigma, 1e-12 * max(scale, 1e-300))
     fi = fisher_information(residuals, params, values, sigma)
     unc = {k: v / 100.0 for k, v in fi["relative_sd_percent"].items()}
@@ -305,4 +334,4 @@ def verdict(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
     }
 
 
-__all__ = ["verdict", "fisher_information", "noise_floor", "residual_tolerance", "UNCERTAIN", "AT_BOUND", "AGREE"]
+__all__ = ["verdict", "fisher_information", "noise_floor", "residual_tolerance", "residual_noise", "agreement_tolerance", "UNCERTAIN", "AT_BOUND", "AGREE"]

@@ -211,10 +211,6 @@ def test_three_section_10mhz_every_value_within_2pct(records):
 
 @pytest.mark.slow
 @needs_ngspice
-@pytest.mark.xfail(strict=False, reason=(
-    "at 1 MHz the Fisher information at the truth determines every value to better than 0.03 %, but the "
-    "global stage does not reach the truth's narrow basin: the stand-in (record H1 of Zin, biased by the "
-    "aliased current) and the time cost both lead to Cs near 0 with Cg about +17 %"))
 def test_three_section_1mhz_within_2pct_or_fisher_says_why(records):
     """At 1 MHz the winding's upper modes lie above the Nyquist frequency. Values that the Fisher information
     at the truth (white noise of the record's own error level) determines to 10 % must come out within 2 %;
