@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -82,12 +83,20 @@ def cramer_rao(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterS
             return np.asarray(residuals(U), float) / s
 
         level = 1.0
-    last: dict[str, float] | None = None
+    return dict(converged_fisher(fun, params, values, level)["relative_sd_percent"])
+
+
+def converged_fisher(residuals: Callable[[np.ndarray], np.ndarray], params: ParameterSet,
+                     values: Mapping[str, float], sigma: float) -> dict[str, Any]:
+    """:func:`estimation.verdict.fisher_information` at the largest step of :data:`STEPS` whose bounds agree
+    within :data:`STEP_AGREEMENT` with the next smaller step's (the smallest step when none do)."""
+    last: dict[str, Any] | None = None
     for step in STEPS:
-        b = dict(fisher_information(fun, params, values, level, rel_step=step)["relative_sd_percent"])
-        if last is not None and all(_close(b[k], last[k]) for k in b):
-            return b
-        last = b
+        fi = fisher_information(residuals, params, values, sigma, rel_step=step)
+        if last is not None and all(_close(fi["relative_sd_percent"][k], last["relative_sd_percent"][k])
+                                    for k in fi["relative_sd_percent"]):
+            return fi
+        last = fi
     assert last is not None
     return last
 

@@ -75,7 +75,7 @@ target waveforms, :func:`estimation.studies.cells.add_noise`; the time paths'
 record is :data:`TIME_AVERAGES` triggered acquisitions of one PRBS6 period,
 averaged, the size of the frequency path's record) and the
 Fisher information of each approach's data at the target
-(:func:`estimation.studies.cells.fisher_information`, the Cramer-Rao bound
+(:func:`estimation.studies.bounds.converged_fisher`, the Cramer-Rao bound
 on each parameter's relative standard deviation; parameters above 5 % are
 reported as ``non_identifiable``) are described in :func:`run`.
 
@@ -772,7 +772,9 @@ def _fisher(approach: str) -> dict[str, Any]:
         t = build_approach("time", "rmse", params)
         res = t.residuals
         what = f"v_in samples, white noise {FISHER_SNR_DB:g} dB below the signal"
-    out = cells.fisher_information(res, params, TARGET, sigma)
+    from . import bounds
+
+    out = bounds.converged_fisher(res, params, TARGET, sigma)
     out.update({"snr_db": FISHER_SNR_DB, "data": what})
     return out
 
