@@ -23,7 +23,7 @@ import numpy as np
 from .optimisers import Budget, OptimResult, minimize
 
 __all__ = ["Recorder", "optimise", "least_squares_polish", "batched_least_squares", "PolishResult",
-           "staged_least_squares", "profile_scan", "sloppiest_parameter", "STALL_FRACTION", "STALL_SPAN"]
+           "staged_least_squares", "profile_scan", "sloppy_parameters", "sloppiest_parameter", "STALL_FRACTION", "STALL_SPAN"]
 
 #: A stage stops when its best cost fell by less than this fraction over its last ``STALL_SPAN (n + 1)`` evaluations.
 STALL_FRACTION = 1e-4
@@ -115,21 +115,26 @@ class _Timeout(Exception):
     pass
 
 
-def sloppiest_parameter(approach: Any, x: np.ndarray, step: float = 1e-6) -> int:
-    """Index of the parameter that dominates the sloppiest direction at ``x`` (unit cube).
+def sloppy_parameters(approach: Any, x: np.ndarray, count: int = 1, step: float = 1e-6) -> list[int]:
+    """Indices of the ``count`` parameters the residuals determine worst at ``x`` (unit cube), worst first.
 
-    The right singular vector of the residuals' Jacobian with the smallest singular
-    value is the direction along which the cost changes least; its largest component
-    names the parameter to profile (:func:`profile_scan`). A log-scaled value whose
-    effect fades as it tends to zero, traded against another, leaves a gradient
-    method on such a plateau.
+    Ranked by the diagonal of ``(J^T J)^+``, ``J`` the residuals' Jacobian in the
+    unit cube: the parameters that move furthest along the directions in which
+    the cost changes least. Those are the ones a gradient method leaves on a
+    plateau (a log-scaled value whose effect fades as it tends to zero, traded
+    against others) and the ones :func:`profile_scan` should step.
     """
     u = np.clip(np.asarray(x, float), 0, 1)
     h = np.where(u + step <= 1, step, -step)
     r = approach.residuals(np.clip(np.vstack([u, u + np.diag(h)]), 0, 1))
     J = ((r[1:] - r[0]) / h[:, None]).T
-    _, _, vt = np.linalg.svd(J, full_matrices=False)
-    return int(np.argmax(np.abs(vt[-1])))
+    var = np.diag(np.linalg.pinv(J.T @ J, rcond=1e-15))
+    return [int(i) for i in np.argsort(-np.abs(var))[: max(int(count), 1)]]
+
+
+def sloppiest_parameter(approach: Any, x: np.ndarray, step: float = 1e-6) -> int:
+    """The worst-determined parameter at ``x`` (:func:`sloppy_parameters` with ``count=1``)."""
+    return sloppy_parameters(approach, x, 1, step)[0]
 
 
 def profile_scan(approach: Any, x: np.ndarray, index: int, points: int = 13, max_nfev: int = 40
