@@ -118,7 +118,7 @@ class _Timeout(Exception):
 def sloppy_parameters(approach: Any, x: np.ndarray, count: int = 1, step: float = 1e-6) -> list[int]:
     """Indices of the ``count`` parameters the residuals determine worst at ``x`` (unit cube), worst first.
 
-    Ranked by the diagonal of ``(J^T J)^+``, ``J`` the residuals' Jacobian in the
+    Ranked by the diagonal of ``(J^T J)^-1``, ``J`` the residuals' Jacobian in the
     unit cube: the parameters that move furthest along the directions in which
     the cost changes least. Those are the ones a gradient method leaves on a
     plateau (a log-scaled value whose effect fades as it tends to zero, traded
@@ -128,8 +128,10 @@ def sloppy_parameters(approach: Any, x: np.ndarray, count: int = 1, step: float 
     h = np.where(u + step <= 1, step, -step)
     r = approach.residuals(np.clip(np.vstack([u, u + np.diag(h)]), 0, 1))
     J = ((r[1:] - r[0]) / h[:, None]).T
-    var = np.diag(np.linalg.pinv(J.T @ J, rcond=1e-15))
-    return [int(i) for i in np.argsort(-np.abs(var))[: max(int(count), 1)]]
+    _, sv, vt = np.linalg.svd(J, full_matrices=False)
+    sv = np.maximum(sv, 1e-12 * max(float(sv[0]), 1e-300))  # a null direction counts as nearly free, not as absent
+    var = np.sum((vt.T / sv[None, :]) ** 2, axis=1)
+    return [int(i) for i in np.argsort(-var)[: max(int(count), 1)]]
 
 
 def sloppiest_parameter(approach: Any, x: np.ndarray, step: float = 1e-6) -> int:
