@@ -183,9 +183,10 @@ class _Context:
     prior: DesignPrior | None = None
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
-            prior: DesignPrior | None | str = "same") -> FrequencyFit:
+            prior: DesignPrior | None | str = "same", couplings: Sequence[str] = ()) -> FrequencyFit:
+        """The fit of ``circuit`` with ``effects`` (``couplings``: K elements fitted too, see :class:`.fit.FrequencyFit`)."""
         return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
-                            self.scale, self.prior if isinstance(prior, str) else prior)
+                            self.scale, self.prior if isinstance(prior, str) else prior, couplings)
 
     def drift(self, r: FitResult) -> list[dict[str, Any]]:
         """Values of ``r`` moved beyond the design tolerance (none without a prior)."""
@@ -596,9 +597,10 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     staged = []
     for cand in section_candidates(circuit, ports):
         try:
-            whole = ctx.fit(cand.circuit, effects)
-            new = {n.lower() for n in cand.new_elements}
-            first = ctx.fit(cand.circuit, effects, fixed=[n for n in whole.free if n.lower() not in new])
+            whole = ctx.fit(cand.circuit, effects, couplings=cand.couplings)
+            new = {n.lower() for n in list(cand.new_elements) + list(cand.couplings)}
+            first = ctx.fit(cand.circuit, effects, fixed=[n for n in whole.free if n.lower() not in new],
+                            couplings=cand.couplings)
             r = first.fit(x0s=np.concatenate([np.zeros(first.nc), tail])[None], grid=False, max_nfev=15, tol=1e-5)
         except _CANDIDATE_FAILURES:  # a structure the data drive into a degenerate network: not a candidate
             continue
@@ -609,7 +611,7 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         if i >= top and (best is not None and best.objective < must_beat or i >= top + 3):
             break
         try:
-            fit = ctx.fit(cand.circuit.with_values(first.values), effects)
+            fit = ctx.fit(cand.circuit.with_values(first.values), effects, couplings=cand.couplings)
             res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), first.x[current_nc(first):]])[None], grid=False,
                           max_nfev=60, tol=1e-6)
         except _CANDIDATE_FAILURES:
@@ -622,7 +624,8 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
             best = res
     if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
                                     or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
-        found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
+        found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
+                                tail)
         if found is not None and (best is None or found[0].objective < best.objective):
             best, um = found
             best.structure = um.candidate.how
@@ -711,7 +714,7 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
             tail = np.concatenate([current.x[nc + offsets[i]: nc + offsets[i + 1]]
                                    for i in range(len(current.effects)) if i != j])
             try:
-                fit = ctx.fit(current.fitted_circuit(), keep)
+                fit = ctx.fit(current.fitted_circuit(), keep, couplings=current.couplings)
                 res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
             except _CANDIDATE_FAILURES:  # the network degenerates without this effect: it stays
                 continue
@@ -769,7 +772,7 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
         freed.append(todo[0]["name"].lower())
         loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
         try:
-            fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose)
+            fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
             tail = current.x[current_nc(current):]
             trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-7)
         except _CANDIDATE_FAILURES:
@@ -788,7 +791,7 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
         try:
             edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
             held = current.fitted_circuit().with_values({name: edge})
-            fit = ctx.fit(held, current.effects, fixed=[name], prior=loose)
+            fit = ctx.fit(held, current.effects, fixed=[name], prior=loose, couplings=current.couplings)
             tail = current.x[current_nc(current):]
             trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=40, tol=1e-6)
         except _CANDIDATE_FAILURES:
@@ -818,7 +821,7 @@ def _extend(ctx: _Context, current: FitResult, cause: str, single: FitResult, va
     cur_tail = list(current.x[current_nc(current):])
     best = None
     for eff in order:
-        fit = ctx.fit(circuit, list(current.effects) + [eff])
+        fit = ctx.fit(circuit, list(current.effects) + [eff], couplings=current.couplings)
         grid = (_effect_starts(ctx, fit, eff) or
                 [dict(zip([p.name for p in eff.parameters], vals)) for vals in itertools.product(
                     *[p.starts or (np.sqrt(p.lower * p.upper),) for p in eff.parameters])])

@@ -42,7 +42,7 @@ from pris_cosim.expressions import Expression
 
 from ..resonances import find_resonances
 from .sections import (Chain, SectionCandidate, _make_pd, _unique, coupling_decay, coupling_matrix, find_chains,
-                       split_section)
+                       split_section, touched_couplings)
 
 #: A measured resonance farther than this (relative frequency) from every model resonance counts as missing.
 MODE_TOLERANCE = 0.04
@@ -228,7 +228,8 @@ class Unmerged:
             new.append(first_c)
         c = _make_pd(c, new_k)
         self.candidate = SectionCandidate(c, f"section {j + 1} of the winding at {chain.port} is two sections",
-                                          new, chain.port)
+                                          new, chain.port, touched_couplings(c, [sec.inductor, new_l]))
+        self.k_name = next((e.name for e in c.of_kind("K") if {n.lower() for n in e.nodes} == {old_l, new_l}), None)
         self.first = {"L": sec.inductor, "R": sec.resistor, "C": first_c}
         self.second = {"L": next(n for n in new if n[0].upper() == "L"),
                        "R": next((n for n in new if n[0].upper() == "R"), None),
@@ -252,7 +253,8 @@ class Unmerged:
         v = fitted.resolve(check=False)
         get = lambda n: float(v[n.lower()])  # noqa: E731
         l1, l2 = get(self.first["L"]), get(self.second["L"])
-        out = {self.first["L"]: l1 + l2 + 2 * self.k_in * np.sqrt(l1 * l2)}
+        k_in = get(self.k_name) if self.k_name else self.k_in  # the fitted coupling between the two halves
+        out = {self.first["L"]: l1 + l2 + 2 * k_in * np.sqrt(l1 * l2)}
         if self.first["R"] and self.second["R"]:
             out[self.first["R"]] = get(self.first["R"]) + get(self.second["R"])
         if self.own_c and self.second["C"]:
@@ -314,9 +316,9 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
     Parameters
     ----------
     make_fit : callable
-        ``make_fit(circuit)`` gives the :class:`.fit.FrequencyFit` of a
-        candidate circuit (with the effects already named, whose fitted
-        parameters are ``tail``).
+        ``make_fit(circuit, couplings)`` gives the :class:`.fit.FrequencyFit` of a
+        candidate circuit with those couplings free (with the effects already
+        named, whose fitted parameters are ``tail``).
     f : numpy.ndarray, Hz
     measured : mapping
         Response name to complex values.
@@ -337,7 +339,7 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
     screened = []
     for um in unmerged_candidates(nominal, ports):
         try:
-            fit = make_fit(um.candidate.circuit)
+            fit = make_fit(um.candidate.circuit, um.candidate.couplings)
             rows = um.seeds(fit.free, tail)
             pred = fit.predict_batch(rows)
             r = fit.residuals_batch(rows)
