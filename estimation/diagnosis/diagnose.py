@@ -31,7 +31,11 @@ Steps:
    (:mod:`.holdout`), and one found from the nominal circuit only while a
    measured resonance is still missing from the model or when it brings the
    fit to the noise floor. Selection stops when the cost
-   reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`).
+   reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`)
+   without values moved far off the design, or, once a section was added,
+   whatever the values (a new section shares the winding's values out anew).
+   A new section frees the couplings of the sections it touches
+   (:mod:`.sections`), in this fit and every later one.
 4. What is still above the noise after the last step is reported by band
    (:func:`.evidence.unexplained_bands`).
 """
@@ -202,6 +206,11 @@ class _Context:
     def explained(self, r: FitResult) -> bool:
         """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
         return r.objective <= NOISE_MARGIN * self.floor and not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
+
+    def settled(self, r: FitResult) -> bool:
+        """No further cause is sought after ``r``: it is :meth:`explained`, or it has a new section (which shares
+        the winding's values out anew, so values off the design are its own) and fits to the noise floor."""
+        return self.explained(r) or (bool(r.structure) and r.objective <= NOISE_MARGIN * self.floor)
 
 
 def diagnose_frequency(
@@ -377,7 +386,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # ---- forward selection
     current, chosen, steps = baseline, [], []
     while pool and len(chosen) < max_causes:
-        if ctx.explained(current):
+        if ctx.settled(current):
             _log("cost at the noise floor: no further cause", progress)
             break
         best = min(pool.values(), key=lambda r: r.bic)
@@ -425,7 +434,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
              progress)
         remaining = [c for c in pool if c not in chosen and "+" not in c]
         pool = {}
-        if len(chosen) >= max_causes or ctx.explained(current):
+        if len(chosen) >= max_causes or ctx.settled(current):
             continue
         for cause in remaining:
             t = time.perf_counter()
@@ -622,6 +631,12 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.cause = "+".join(res.causes)
         if best is None or res.objective < best.objective:
             best = res
+    if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)):
+        split = _split_nominal(ctx, effects, tail, ports)
+        if split is not None and (best is None or split.objective < best.objective):
+            best = split
+            best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
+            best.cause = "+".join(best.causes)
     if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
                                     or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
         found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
@@ -633,6 +648,39 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
     return best
+
+
+#: Splits of the nominal circuit (:func:`_split_nominal`): evaluations of each screening fit and of the final fit.
+NOMINAL_SCREEN_NFEV = 15
+NOMINAL_NFEV = 100
+
+
+def _split_nominal(ctx: _Context, effects: Sequence[Effect], tail: np.ndarray, ports: Sequence[str]
+                   ) -> FitResult | None:
+    """Every section of the nominal circuit split in two, every value and the touched couplings free.
+
+    A fitted baseline far from the data has distorted values that a split
+    started from it keeps; the design values are free of that. Each split is
+    screened by a short fit of all its values, the best is fitted in full.
+    """
+    screened = []
+    for cand in section_candidates(ctx.nominal, ports, grid=()):
+        try:
+            fit = ctx.fit(cand.circuit, effects, couplings=cand.couplings)
+            r = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=NOMINAL_SCREEN_NFEV,
+                        tol=1e-5)
+        except _CANDIDATE_FAILURES:
+            continue
+        screened.append((r.objective, cand, fit, r))
+    if not screened:
+        return None
+    _, cand, fit, first = min(screened, key=lambda t: t[0])
+    try:
+        res = fit.fit(x0s=first.x[None], grid=False, max_nfev=NOMINAL_NFEV, tol=1e-7)
+    except _CANDIDATE_FAILURES:
+        res = first
+    res.structure = f"{cand.how} (from the design values)"
+    return res
 
 
 def _polish_baseline(ctx: _Context, baseline: FitResult, fits, progress: bool) -> FitResult:

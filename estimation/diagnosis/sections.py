@@ -363,7 +363,7 @@ def add_section(circuit: Circuit, chain: Chain, at: str, rho: float, l_scale: fl
 def section_candidates(circuit: Circuit, ports: Sequence[str], grid: Sequence[float] = (0.3, 1.0, 3.0)
                        ) -> list[SectionCandidate]:
     """Every split (with a small and a typical shunt capacitor) and every end addition (over a grid of
-    inductance scales) for every chain."""
+    inductance scales; none for an empty ``grid``) for every chain."""
     chains = find_chains(circuit, ports)
     values = circuit.resolve(check=False)
     rho = coupling_decay(circuit, chains, values)
