@@ -642,9 +642,9 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
                                 tail)
         if found is not None and (best is None or found[0].objective < best.objective):
-            best, um = found
+            best, um, merged = found
             best.structure = um.candidate.how
-            best.merged_back = {**best.values, **um.merged_back(best.fitted_circuit())}
+            best.merged_back = {**merged.values, **um.merged_back(merged.fitted_circuit())}
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
     return best

@@ -24,6 +24,11 @@ natural frequency more in the band), the search here starts elsewhere:
    resonances of their responses sit on the measured ones
    (:func:`resonance_score`), and by cost; the best few are fitted in full.
 
+4. *Couplings.* The seeds are fitted with the couplings as designed; the
+   best is then refitted with the couplings of the two sections free
+   (:mod:`.sections`), while its fit with the designed couplings is the one
+   merged back to refit the baseline (which keeps its couplings).
+
 Whether any of this is tried is decided by :func:`missing_modes` (measured
 resonances the fitted baseline lacks), so data without a missing mode cost
 nothing extra.
@@ -310,8 +315,12 @@ def unmerged_candidates(nominal: Circuit, ports: Sequence[str]) -> list[Unmerged
 
 def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np.ndarray], nominal: Circuit,
                     ports: Sequence[str], tail: np.ndarray, by_resonance: int = 2, by_cost: int = 0,
-                    screen_nfev: int = 15, max_nfev: int = 80):
-    """Fit every un-merged candidate from its best seeds; return the best fit and its candidate (or ``None``).
+                    screen_nfev: int = 15, max_nfev: int = 80, coupling_nfev: int = 60):
+    """Fit every un-merged candidate from its best seeds; the best fit, its candidate and the fit to merge back.
+
+    The seeds are fitted with the couplings as designed (the baseline's
+    own: the fit whose two sections merged back refit the baseline), the
+    best of them then with the couplings the split touches free too.
 
     Parameters
     ----------
@@ -330,16 +339,22 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
     by_resonance, by_cost : int
         Seeds fitted per candidate: the best by :func:`resonance_score`, then
         the best by cost among the rest.
-    screen_nfev, max_nfev : int
-        Evaluations of the short fits of every seed kept, and of the final fit
-        of the best.
+    screen_nfev, max_nfev, coupling_nfev : int
+        Evaluations of the short fits of every seed kept, of the final fit
+        of the best, and of its fit with the couplings free.
+
+    Returns
+    -------
+    tuple or None
+        ``(fit, candidate, merged)``: the best fit (couplings free), its
+        :class:`Unmerged` and the fit with the couplings as designed.
     """
     from .fit import DiagnosisError
 
     screened = []
     for um in unmerged_candidates(nominal, ports):
         try:
-            fit = make_fit(um.candidate.circuit, um.candidate.couplings)
+            fit = make_fit(um.candidate.circuit, ())
             rows = um.seeds(fit.free, tail)
             pred = fit.predict_batch(rows)
             r = fit.residuals_batch(rows)
@@ -363,4 +378,16 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         res = fit.fit(x0s=first.x[None], grid=False, max_nfev=max_nfev, tol=1e-7)
     except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
         res = first
-    return (res if res.cost < first.cost else first), um
+    res = res if res.cost < first.cost else first
+    merged = res
+    if um.candidate.couplings:  # then the couplings the split touches, from there
+        try:
+            loose = make_fit(res.fitted_circuit(), um.candidate.couplings)
+            nc = res.x.size - sum(len(e.parameters) for e in res.effects)
+            x0 = np.concatenate([np.zeros(loose.nc), res.x[nc:]])
+            refined = loose.fit(x0s=x0[None], grid=False, max_nfev=coupling_nfev, tol=1e-7)
+            if refined.objective < res.objective:
+                res = refined
+        except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
+            pass
+    return res, um, merged
