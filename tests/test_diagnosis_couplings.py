@@ -50,6 +50,7 @@ def test_core_loop_magnetising_inductance_in_series_form():
     assert groups.inductors["core"] == ("Lc",)
     variants = effect_variants("magnetising-inductance", groups, model.circuit, 10.0, False, 1.0, 1e4)
     assert {(v.form, v.group) for v in variants} >= {("causal", "core"), ("series", "core")}
+    assert all(v.group == "core" for v in variants if v.form == "series")
     eff = MagnetisingInductance(form="series", group="core", f_ref=10.0, f_max=1e4)
     assert eff.branches(model.circuit, groups) == ["Lc"]
     f = np.array([10.0, 100.0, 1e4])

@@ -25,13 +25,13 @@ only, ``hv`` only, ``all``).
 ``magnetising-inductance``
     thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = f_ref^b``: ``a`` and
     ``L_linear`` are not separable, so ``L(f_ref) = L_linear``); causal:
-    ``L (j f/f_ref)^(-b)``; series (coupled inductors): ``j w L [(j f/f_top)^(-b) - 1]``
-    uncoupled in series with ``L`` (couplings on its value ``L`` at the top
-    of the band ``f_top``, as a ladder realises it). Applied to the winding
-    inductances with their mutuals (``M_ij`` scales with ``sqrt(L_i L_j)``;
-    the series form leaves them), per winding group, or
+    ``L (j f/f_ref)^(-b)``. Applied to the winding inductances with their
+    mutuals (``M_ij`` scales with ``sqrt(L_i L_j)``), per winding group, or
     to the magnetising branch (group ``core``: the inductor of the core-loss
-    loop ``Lc || Rc``, with its mutuals).
+    loop ``Lc || Rc``, with its mutuals); a coupled magnetising branch also
+    in series form, ``j w L [(j f/f_top)^(-b) - 1]`` uncoupled in series with
+    ``L`` (its couplings on its value at the top of the band ``f_top``, as a
+    ladder realises it).
 ``stray-capacitance``
     one-port data: a lossy fixture capacitance across the port, the causal
     constant-phase admittance ``Y = w0 C (j f/f0)^alpha`` (``alpha = 1`` an
@@ -543,8 +543,9 @@ def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, 
             out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
         elif cause == "magnetising-inductance" and form != "relaxation":
             out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in l_groups]
-            if form == "causal" and circuit.of_kind("K"):  # coupled inductors: the excess outside the couplings too
-                out += [MagnetisingInductance(form="series", group=g, f_ref=f_ref, f_max=f_max) for g in l_groups]
+            if form == "causal" and "core" in l_groups and circuit.of_kind("K"):
+                # a coupled magnetising branch: its excess outside the couplings too
+                out.append(MagnetisingInductance(form="series", group="core", f_ref=f_ref, f_max=f_max))
         elif cause == "core-loss" and form != "relaxation":
             out.append(CoreLoss(form=form, group="all", f_ref=f_ref, f_max=f_max))
     if one_port and cause == "stray-capacitance":

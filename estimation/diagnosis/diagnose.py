@@ -657,7 +657,7 @@ NOMINAL_NFEV = 100
 
 def _split_nominal(ctx: _Context, effects: Sequence[Effect], tail: np.ndarray, ports: Sequence[str]
                    ) -> FitResult | None:
-    """Every section of the nominal circuit split in two, every value and the touched couplings free.
+    """Every section of the nominal circuit split in two, every value and the touched (tight) couplings free.
 
     A fitted baseline far from the data has distorted values that a split
     started from it keeps; the design values are free of that. Each split is
@@ -665,6 +665,8 @@ def _split_nominal(ctx: _Context, effects: Sequence[Effect], tail: np.ndarray, p
     """
     screened = []
     for cand in section_candidates(ctx.nominal, ports, grid=()):
+        if not cand.couplings:  # loosely coupled: the splits of the nominal circuit are :mod:`.unmerge`'s
+            continue
         try:
             fit = ctx.fit(cand.circuit, effects, couplings=cand.couplings)
             r = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=NOMINAL_SCREEN_NFEV,

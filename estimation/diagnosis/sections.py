@@ -19,9 +19,10 @@ ended. Every new inductance matrix is checked to be positive definite (new
 couplings shrunk until it is).
 
 A new section changes the leakage between the sections it touches: the
-couplings of the changed inductors (the split section's two halves, the
-added section and its neighbour) to every other inductor are named in the
-candidate (:attr:`SectionCandidate.couplings`), for the fit to free them.
+tight couplings (``k >= 0.9``, windings on one core) of the changed
+inductors (the split section's two halves, the added section and its
+neighbour) to every other inductor are named in the candidate
+(:attr:`SectionCandidate.couplings`), for the fit to free them.
 """
 
 from __future__ import annotations
@@ -221,11 +222,22 @@ class SectionCandidate:
     couplings: list[str] = field(default_factory=list)
 
 
-def touched_couplings(circuit: Circuit, inductors: Sequence[str]) -> list[str]:
-    """Numeric K elements of ``circuit`` that couple one of ``inductors`` to any inductor."""
+#: Couplings at least this tight are freed by a new section (:func:`touched_couplings`).
+TIGHT_COUPLING = 0.9
+
+
+def touched_couplings(circuit: Circuit, inductors: Sequence[str], tight: float = TIGHT_COUPLING) -> list[str]:
+    """Numeric K elements of ``circuit`` that couple one of ``inductors`` to any inductor at ``k >= tight``.
+
+    Only tight couplings are freed: where the leakage ``1 - k`` is small, a
+    change of ``k`` by a fraction of a per cent changes it by tens of per
+    cent, which no split with the couplings held can follow; looser
+    couplings (a winding's sections among themselves) follow the winding's
+    coupling profile.
+    """
     names = {n.lower() for n in inductors}
     return [k.name for k in circuit.of_kind("K") if not isinstance(k.value, Expression)
-            and names & {n.lower() for n in k.nodes}]
+            and names & {n.lower() for n in k.nodes} and float(k.value) >= tight]
 
 
 def _couple_new(c: Circuit, new_l: str, partners: Mapping[str, float]) -> list[str]:
