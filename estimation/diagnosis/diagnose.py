@@ -30,12 +30,15 @@ Steps:
    section) must also remove that share of the cost on held-out points
    (:mod:`.holdout`), and one found from the nominal circuit only while a
    measured resonance is still missing from the model or when it brings the
-   fit to the noise floor. Selection stops when the cost
+   fit to the noise floor (a split of the design with its couplings free:
+   within ``UNMERGE_ABOVE_FLOOR`` times it). Selection stops when the cost
    reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`)
    without values moved far off the design, or, once a section was added,
    whatever the values (a new section shares the winding's values out anew).
-   A new section frees the couplings of the sections it touches
-   (:mod:`.sections`), in this fit and every later one.
+   A new section sought before any other cause is named frees the tight
+   couplings of the sections it touches (:mod:`.sections`), in its fit and
+   every later refit of that model; one sought after a frequency-dependent
+   cause keeps the couplings (with them free it would take that cause's rest).
 4. What is still above the noise after the last step is reported by band
    (:func:`.evidence.unexplained_bands`).
 """
@@ -397,6 +400,15 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         new_cause = new_causes[-1] if any(c in STRUCTURAL for c in new_causes) and len(new_causes) > 1 else \
             new_causes[0]
         if new_cause in STRUCTURAL:
+            if getattr(best, "from_design", False) and best.objective > UNMERGE_ABOVE_FLOOR * floor["cost"] \
+                    and not missing_modes(f, data, current.predicted):
+                _log(f"{new_cause}: a split of the design values that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise "
+                     "and no measured resonance missing: refused", progress)
+                failed.append({"cause": new_cause, "cost": best.cost,
+                               "reason": "a split of the design values, no measured resonance missing from the model "
+                                         "without it, and the fit with it stays far above the noise"})
+                pool.pop(best.cause if best.cause in pool else new_cause)
+                continue
             if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
                     and not missing_modes(f, data, current.predicted)):
                 _log(f"{new_cause}: the model without it has every measured resonance and the split does not reach "
@@ -605,6 +617,8 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     tail = base.x[current_nc(base):] if effects else np.zeros(0)
     staged = []
     for cand in section_candidates(circuit, ports):
+        if effects:  # after a frequency-dependent cause, a section with free couplings would only take its rest
+            cand.couplings = []
         try:
             whole = ctx.fit(cand.circuit, effects, couplings=cand.couplings)
             new = {n.lower() for n in list(cand.new_elements) + list(cand.couplings)}
@@ -631,7 +645,9 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.cause = "+".join(res.causes)
         if best is None or res.objective < best.objective:
             best = res
-    if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)):
+    # a missing section alone (no cause named yet): the design's sections split with their couplings free
+    if not effects and ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor
+                                                    or ctx.distorted(base)):
         split = _split_nominal(ctx, effects, tail, ports)
         if split is not None and (best is None or split.objective < best.objective):
             best = split
@@ -640,7 +656,7 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
                                     or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
         found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
-                                tail)
+                                tail, free_couplings=not effects)
         if found is not None and (best is None or found[0].objective < best.objective):
             best, um, merged = found
             best.structure = um.candidate.how
@@ -682,6 +698,7 @@ def _split_nominal(ctx: _Context, effects: Sequence[Effect], tail: np.ndarray, p
     except _CANDIDATE_FAILURES:
         res = first
     res.structure = f"{cand.how} (from the design values)"
+    res.from_design = True
     return res
 
 

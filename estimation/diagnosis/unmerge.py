@@ -315,7 +315,7 @@ def unmerged_candidates(nominal: Circuit, ports: Sequence[str]) -> list[Unmerged
 
 def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np.ndarray], nominal: Circuit,
                     ports: Sequence[str], tail: np.ndarray, by_resonance: int = 2, by_cost: int = 0,
-                    screen_nfev: int = 15, max_nfev: int = 80, coupling_nfev: int = 60):
+                    screen_nfev: int = 15, max_nfev: int = 80, coupling_nfev: int = 60, free_couplings: bool = True):
     """Fit every un-merged candidate from its best seeds; the best fit, its candidate and the fit to merge back.
 
     The seeds are fitted with the couplings as designed (the baseline's
@@ -342,6 +342,8 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
     screen_nfev, max_nfev, coupling_nfev : int
         Evaluations of the short fits of every seed kept, of the final fit
         of the best, and of its fit with the couplings free.
+    free_couplings : bool
+        Refit the best with the couplings the split touches free.
 
     Returns
     -------
@@ -380,7 +382,7 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         res = first
     res = res if res.cost < first.cost else first
     merged = res
-    if um.candidate.couplings:  # then the couplings the split touches, from there
+    if free_couplings and um.candidate.couplings:  # then the couplings the split touches, from there
         try:
             loose = make_fit(res.fitted_circuit(), um.candidate.couplings)
             nc = res.x.size - sum(len(e.parameters) for e in res.effects)
