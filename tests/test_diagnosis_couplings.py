@@ -1,9 +1,8 @@
-"""Couplings freed by a missing section, and the magnetising inductance of the core loop (closed forms)."""
+"""Couplings freed by a missing section (closed forms)."""
 
 import numpy as np
 
-from estimation.diagnosis.catalogue import MagnetisingInductance, effect_variants, winding_groups
-from estimation.diagnosis.fit import FrequencyFit, configuration_ports, group_names
+from estimation.diagnosis.fit import FrequencyFit
 from estimation.diagnosis.sections import coupling_decay, find_chains, split_section
 from pris_cosim.models import get_model
 
@@ -42,18 +41,3 @@ def test_split_section_names_the_couplings_it_touches():
     for name in cand.couplings:
         assert {"lb2", new_l.lower()} & {n.lower() for n in cand.circuit.element(name).nodes}
 
-
-def test_core_loop_magnetising_inductance_in_series_form():
-    model = get_model("hv-4section")
-    groups = winding_groups(model.circuit, configuration_ports(model.configurations.values()),
-                            group_names(model.configurations.values()))
-    assert groups.inductors["core"] == ("Lc",)
-    variants = effect_variants("magnetising-inductance", groups, model.circuit, 10.0, False, 1.0, 1e4)
-    assert {(v.form, v.group) for v in variants} >= {("causal", "core"), ("series", "core")}
-    assert all(v.group == "core" for v in variants if v.form == "series")
-    eff = MagnetisingInductance(form="series", group="core", f_ref=10.0, f_max=1e4)
-    assert eff.branches(model.circuit, groups) == ["Lc"]
-    f = np.array([10.0, 100.0, 1e4])
-    (names, dz), = eff.branch_changes(model.circuit, groups, {"lc": np.array([308.6])}, f, {"b": np.array([0.05])})
-    expected = 2j * np.pi * f * 308.6 * ((1j * f / 1e4) ** -0.05 - 1)  # j w L [(j f/f_top)^-b - 1], uncoupled
-    assert names == ["Lc"] and np.allclose(dz[0, :, 0, 0], expected)

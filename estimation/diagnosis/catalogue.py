@@ -26,12 +26,7 @@ only, ``hv`` only, ``all``).
     thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = f_ref^b``: ``a`` and
     ``L_linear`` are not separable, so ``L(f_ref) = L_linear``); causal:
     ``L (j f/f_ref)^(-b)``. Applied to the winding inductances with their
-    mutuals (``M_ij`` scales with ``sqrt(L_i L_j)``), per winding group, or
-    to the magnetising branch (group ``core``: the inductor of the core-loss
-    loop ``Lc || Rc``, with its mutuals); a coupled magnetising branch also
-    in series form, ``j w L [(j f/f_top)^(-b) - 1]`` uncoupled in series with
-    ``L`` (its couplings on its value at the top of the band ``f_top``, as a
-    ladder realises it).
+    mutuals (``M_ij`` scales with ``sqrt(L_i L_j)``).
 ``stray-capacitance``
     one-port data: a lossy fixture capacitance across the port, the causal
     constant-phase admittance ``Y = w0 C (j f/f0)^alpha`` (``alpha = 1`` an
@@ -105,31 +100,16 @@ def winding_groups(circuit: Circuit, ports: Sequence[str], names: Mapping[str, s
         ind = {k: v for k, v in ind.items() if v}
     res["all"] = tuple(r for ch in chains for r in ch.resistors)
     ind["all"] = tuple(i for ch in chains for i in ch.inductors)
-    core = core_inductor(circuit)
-    if core is not None:
-        ind["core"] = (core,)
     return Groups(res, ind, core_loss_resistor(circuit), circuit.require_node(ports[0]) if ports else "")
-
-
-def _core_loop(circuit: Circuit) -> tuple[str, str] | None:
-    """``(resistor, inductor)`` of the core-loss loop ``Lc || Rc`` (a resistor in parallel with an inductor)."""
-    for r in circuit.of_kind("R"):
-        for l in circuit.inductors():
-            if set(r.nodes) == set(l.nodes):
-                return r.name, l.name
-    return None
 
 
 def core_loss_resistor(circuit: Circuit) -> str | None:
     """A resistor in parallel with an inductor (the core-loss loop ``Lc || Rc``), if any."""
-    loop = _core_loop(circuit)
-    return loop[0] if loop else None
-
-
-def core_inductor(circuit: Circuit) -> str | None:
-    """The inductor of the core-loss loop (the magnetising branch), if any."""
-    loop = _core_loop(circuit)
-    return loop[1] if loop else None
+    for r in circuit.of_kind("R"):
+        for l in circuit.inductors():
+            if set(r.nodes) == set(l.nodes):
+                return r.name
+    return None
 
 
 def _p(p: Mapping[str, np.ndarray], name: str) -> np.ndarray:
@@ -372,8 +352,6 @@ class MagnetisingInductance(Effect):
         group = set(n.lower() for n in groups.inductors.get(self.group, ()))
         if not group:
             return []
-        if self.form == "series":  # the change is uncoupled: the inductors themselves only
-            return [l.name for l in circuit.inductors() if l.key in group]
         coupled = set(group)
         for k in circuit.of_kind("K"):
             a, b = (n.lower() for n in k.nodes)
@@ -389,16 +367,10 @@ class MagnetisingInductance(Effect):
         if self.form == "thesis":
             b = _p(p, "b")
             return magnetising_inductance(f[None, :], 1.0, self.f_ref ** b, b).astype(complex)
-        if self.form == "series":
-            return (1j * f[None, :] / _band_top(self)) ** (-_p(p, "b"))
         return (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
 
     def branch_changes(self, circuit, groups, values, f, p):
         names = self.branches(circuit, groups)
-        if self.form == "series":  # j w L (g - 1) in series with each inductor, its couplings unchanged
-            g = self.scale(f, p)
-            s = 2j * np.pi * f[None, :]
-            return _diag(names, np.stack([s * _col(values, n) * (g - 1) for n in names], axis=-1))
         group = set(n.lower() for n in groups.inductors.get(self.group, ()))
         sub = Circuit(elements=[circuit.element(n) for n in names] +
                       [k for k in circuit.of_kind("K") if all(x.lower() in {n.lower() for n in names} for x in k.nodes)])
@@ -417,9 +389,6 @@ class MagnetisingInductance(Effect):
         if self.form == "thesis":
             return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
                     f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
-        if self.form == "series":
-            return (f"Z_L(f) = j w L (j f/{_band_top(self):.4g} Hz)^(-b), b = {p['b']:.4g}: the couplings on L (its "
-                    "value at the top of the band), the excess uncoupled in series")
         return f"Z_L(f) = j w L (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}"
 
     def realise(self, circuit, groups, p, fmin, fmax):
@@ -536,16 +505,11 @@ def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, 
     out: list[Effect] = []
     names = [g for g in groups.resistors if g != "all"]
     group_list = (names + ["all"]) if len(names) > 1 else ["all"]
-    # the magnetising branch (the core loop's inductor) is a group of the magnetising inductance of its own
-    l_groups = group_list + (["core"] if "core" in groups.inductors else [])
     for form in ("thesis", "causal", "relaxation"):
         if cause == "skin-effect":
             out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
         elif cause == "magnetising-inductance" and form != "relaxation":
-            out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in l_groups]
-            if form == "causal" and "core" in l_groups and circuit.of_kind("K"):
-                # a coupled magnetising branch: its excess outside the couplings too
-                out.append(MagnetisingInductance(form="series", group="core", f_ref=f_ref, f_max=f_max))
+            out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
         elif cause == "core-loss" and form != "relaxation":
             out.append(CoreLoss(form=form, group="all", f_ref=f_ref, f_max=f_max))
     if one_port and cause == "stray-capacitance":
