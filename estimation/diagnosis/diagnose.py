@@ -31,7 +31,7 @@ Steps:
    (:mod:`.holdout`), and one found from the nominal circuit only while a
    measured resonance is still missing from the model or when it brings the
    fit to the noise floor (a split of the design with its couplings free:
-   within ``UNMERGE_ABOVE_FLOOR`` times it). Selection stops when the cost
+   only within ``UNMERGE_ABOVE_FLOOR`` times it, whatever the resonances). Selection stops when the cost
    reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`)
    without values moved far off the design, or, once a section was added,
    whatever the values (a new section shares the winding's values out anew).
@@ -400,13 +400,12 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         new_cause = new_causes[-1] if any(c in STRUCTURAL for c in new_causes) and len(new_causes) > 1 else \
             new_causes[0]
         if new_cause in STRUCTURAL:
-            if getattr(best, "from_design", False) and best.objective > UNMERGE_ABOVE_FLOOR * floor["cost"] \
-                    and not missing_modes(f, data, current.predicted):
-                _log(f"{new_cause}: a split of the design values that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise "
-                     "and no measured resonance missing: refused", progress)
+            if getattr(best, "from_design", False) and best.objective > UNMERGE_ABOVE_FLOOR * floor["cost"]:
+                _log(f"{new_cause}: a split of the design values that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise: "
+                     "refused", progress)
                 failed.append({"cause": new_cause, "cost": best.cost,
-                               "reason": "a split of the design values, no measured resonance missing from the model "
-                                         "without it, and the fit with it stays far above the noise"})
+                               "reason": "a split of the design values with its couplings free, and the fit with it "
+                                         "stays far above the noise"})
                 pool.pop(best.cause if best.cause in pool else new_cause)
                 continue
             if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
