@@ -30,8 +30,15 @@ Steps:
    section) must also remove that share of the cost on held-out points
    (:mod:`.holdout`), and one found from the nominal circuit only while a
    measured resonance is still missing from the model or when it brings the
-   fit to the noise floor. Selection stops when the cost
-   reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`).
+   fit to the noise floor (a split of the design with its couplings free:
+   only within ``UNMERGE_ABOVE_FLOOR`` times it, whatever the resonances). Selection stops when the cost
+   reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`)
+   without values moved far off the design, or, once a section was added,
+   whatever the values (a new section shares the winding's values out anew).
+   A new section sought before any other cause is named frees the tight
+   couplings of the sections it touches (:mod:`.sections`), in its fit and
+   every later refit of that model; one sought after a frequency-dependent
+   cause keeps the couplings (with them free it would take that cause's rest).
 4. What is still above the noise after the last step is reported by band
    (:func:`.evidence.unexplained_bands`).
 """
@@ -183,9 +190,10 @@ class _Context:
     prior: DesignPrior | None = None
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
-            prior: DesignPrior | None | str = "same") -> FrequencyFit:
+            prior: DesignPrior | None | str = "same", couplings: Sequence[str] = ()) -> FrequencyFit:
+        """The fit of ``circuit`` with ``effects`` (``couplings``: K elements fitted too, see :class:`.fit.FrequencyFit`)."""
         return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
-                            self.scale, self.prior if isinstance(prior, str) else prior)
+                            self.scale, self.prior if isinstance(prior, str) else prior, couplings)
 
     def drift(self, r: FitResult) -> list[dict[str, Any]]:
         """Values of ``r`` moved beyond the design tolerance (none without a prior)."""
@@ -201,6 +209,11 @@ class _Context:
     def explained(self, r: FitResult) -> bool:
         """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
         return r.objective <= NOISE_MARGIN * self.floor and not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
+
+    def settled(self, r: FitResult) -> bool:
+        """No further cause is sought after ``r``: it is :meth:`explained`, or it has a new section (which shares
+        the winding's values out anew, so values off the design are its own) and fits to the noise floor."""
+        return self.explained(r) or (bool(r.structure) and r.objective <= NOISE_MARGIN * self.floor)
 
 
 def diagnose_frequency(
@@ -376,7 +389,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # ---- forward selection
     current, chosen, steps = baseline, [], []
     while pool and len(chosen) < max_causes:
-        if ctx.explained(current):
+        if ctx.settled(current):
             _log("cost at the noise floor: no further cause", progress)
             break
         best = min(pool.values(), key=lambda r: r.bic)
@@ -387,6 +400,14 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         new_cause = new_causes[-1] if any(c in STRUCTURAL for c in new_causes) and len(new_causes) > 1 else \
             new_causes[0]
         if new_cause in STRUCTURAL:
+            if getattr(best, "from_design", False) and best.objective > UNMERGE_ABOVE_FLOOR * floor["cost"]:
+                _log(f"{new_cause}: a split of the design values that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise: "
+                     "refused", progress)
+                failed.append({"cause": new_cause, "cost": best.cost,
+                               "reason": "a split of the design values with its couplings free, and the fit with it "
+                                         "stays far above the noise"})
+                pool.pop(best.cause if best.cause in pool else new_cause)
+                continue
             if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
                     and not missing_modes(f, data, current.predicted)):
                 _log(f"{new_cause}: the model without it has every measured resonance and the split does not reach "
@@ -424,7 +445,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
              progress)
         remaining = [c for c in pool if c not in chosen and "+" not in c]
         pool = {}
-        if len(chosen) >= max_causes or ctx.explained(current):
+        if len(chosen) >= max_causes or ctx.settled(current):
             continue
         for cause in remaining:
             t = time.perf_counter()
@@ -595,10 +616,13 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     tail = base.x[current_nc(base):] if effects else np.zeros(0)
     staged = []
     for cand in section_candidates(circuit, ports):
+        if effects:  # after a frequency-dependent cause, a section with free couplings would only take its rest
+            cand.couplings = []
         try:
-            whole = ctx.fit(cand.circuit, effects)
-            new = {n.lower() for n in cand.new_elements}
-            first = ctx.fit(cand.circuit, effects, fixed=[n for n in whole.free if n.lower() not in new])
+            whole = ctx.fit(cand.circuit, effects, couplings=cand.couplings)
+            new = {n.lower() for n in list(cand.new_elements) + list(cand.couplings)}
+            first = ctx.fit(cand.circuit, effects, fixed=[n for n in whole.free if n.lower() not in new],
+                            couplings=cand.couplings)
             r = first.fit(x0s=np.concatenate([np.zeros(first.nc), tail])[None], grid=False, max_nfev=15, tol=1e-5)
         except _CANDIDATE_FAILURES:  # a structure the data drive into a degenerate network: not a candidate
             continue
@@ -609,7 +633,7 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         if i >= top and (best is not None and best.objective < must_beat or i >= top + 3):
             break
         try:
-            fit = ctx.fit(cand.circuit.with_values(first.values), effects)
+            fit = ctx.fit(cand.circuit.with_values(first.values), effects, couplings=cand.couplings)
             res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), first.x[current_nc(first):]])[None], grid=False,
                           max_nfev=60, tol=1e-6)
         except _CANDIDATE_FAILURES:
@@ -620,16 +644,61 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
         res.cause = "+".join(res.causes)
         if best is None or res.objective < best.objective:
             best = res
+    # a missing section alone (no cause named yet): the design's sections split with their couplings free
+    if not effects and ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor
+                                                    or ctx.distorted(base)):
+        split = _split_nominal(ctx, effects, tail, ports)
+        if split is not None and (best is None or split.objective < best.objective):
+            best = split
+            best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
+            best.cause = "+".join(best.causes)
     if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
                                     or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
-        found = search_unmerged(lambda c: ctx.fit(c, effects), ctx.f, ctx.data, ctx.nominal, ports, tail)
+        found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
+                                tail, free_couplings=not effects)
         if found is not None and (best is None or found[0].objective < best.objective):
-            best, um = found
+            best, um, merged = found
             best.structure = um.candidate.how
-            best.merged_back = {**best.values, **um.merged_back(best.fitted_circuit())}
+            best.merged_back = {**merged.values, **um.merged_back(merged.fitted_circuit())}
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
     return best
+
+
+#: Splits of the nominal circuit (:func:`_split_nominal`): evaluations of each screening fit and of the final fit.
+NOMINAL_SCREEN_NFEV = 15
+NOMINAL_NFEV = 100
+
+
+def _split_nominal(ctx: _Context, effects: Sequence[Effect], tail: np.ndarray, ports: Sequence[str]
+                   ) -> FitResult | None:
+    """Every section of the nominal circuit split in two, every value and the touched (tight) couplings free.
+
+    A fitted baseline far from the data has distorted values that a split
+    started from it keeps; the design values are free of that. Each split is
+    screened by a short fit of all its values, the best is fitted in full.
+    """
+    screened = []
+    for cand in section_candidates(ctx.nominal, ports, grid=()):
+        if not cand.couplings:  # loosely coupled: the splits of the nominal circuit are :mod:`.unmerge`'s
+            continue
+        try:
+            fit = ctx.fit(cand.circuit, effects, couplings=cand.couplings)
+            r = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=NOMINAL_SCREEN_NFEV,
+                        tol=1e-5)
+        except _CANDIDATE_FAILURES:
+            continue
+        screened.append((r.objective, cand, fit, r))
+    if not screened:
+        return None
+    _, cand, fit, first = min(screened, key=lambda t: t[0])
+    try:
+        res = fit.fit(x0s=first.x[None], grid=False, max_nfev=NOMINAL_NFEV, tol=1e-7)
+    except _CANDIDATE_FAILURES:
+        res = first
+    res.structure = f"{cand.how} (from the design values)"
+    res.from_design = True
+    return res
 
 
 def _polish_baseline(ctx: _Context, baseline: FitResult, fits, progress: bool) -> FitResult:
@@ -711,7 +780,7 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
             tail = np.concatenate([current.x[nc + offsets[i]: nc + offsets[i + 1]]
                                    for i in range(len(current.effects)) if i != j])
             try:
-                fit = ctx.fit(current.fitted_circuit(), keep)
+                fit = ctx.fit(current.fitted_circuit(), keep, couplings=current.couplings)
                 res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
             except _CANDIDATE_FAILURES:  # the network degenerates without this effect: it stays
                 continue
@@ -769,7 +838,7 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
         freed.append(todo[0]["name"].lower())
         loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
         try:
-            fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose)
+            fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
             tail = current.x[current_nc(current):]
             trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-7)
         except _CANDIDATE_FAILURES:
@@ -788,7 +857,7 @@ def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict
         try:
             edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
             held = current.fitted_circuit().with_values({name: edge})
-            fit = ctx.fit(held, current.effects, fixed=[name], prior=loose)
+            fit = ctx.fit(held, current.effects, fixed=[name], prior=loose, couplings=current.couplings)
             tail = current.x[current_nc(current):]
             trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=40, tol=1e-6)
         except _CANDIDATE_FAILURES:
@@ -818,7 +887,7 @@ def _extend(ctx: _Context, current: FitResult, cause: str, single: FitResult, va
     cur_tail = list(current.x[current_nc(current):])
     best = None
     for eff in order:
-        fit = ctx.fit(circuit, list(current.effects) + [eff])
+        fit = ctx.fit(circuit, list(current.effects) + [eff], couplings=current.couplings)
         grid = (_effect_starts(ctx, fit, eff) or
                 [dict(zip([p.name for p in eff.parameters], vals)) for vals in itertools.product(
                     *[p.starts or (np.sqrt(p.lower * p.upper),) for p in eff.parameters])])

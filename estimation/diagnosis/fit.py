@@ -9,7 +9,12 @@ that it counts equally whatever its number of points; the cost is
 Circuit values are fitted in log scale relative to their starting values
 (positive by construction); couplings stay at their starting values, which
 keeps the inductance matrix positive definite whatever the fit does to the
-self-inductances.
+self-inductances, unless named in ``couplings`` (a structural change frees
+the couplings of the sections it touches): those are fitted as
+``ln((1 - k) / (1 - k_0))``, so ``k`` stays below 1 and a coupling near
+unity moves by steps relative to its leakage ``1 - k``. A step that leaves
+the inductance matrix not positive definite gets the residuals of a
+non-finite response.
 
 Speed: responses come from the pole-residue form of the constant circuit
 with the effects closed around it (:mod:`.network`); a batch of parameter
@@ -28,6 +33,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from pris_cosim.circuit import Circuit
+from pris_cosim.expressions import Expression
 from pris_cosim.models import Configuration
 
 from .catalogue import Effect, Groups, winding_groups
@@ -107,6 +113,8 @@ class FitResult:
     x: np.ndarray = field(default=None, repr=False)
     penalty: float = 0.0
     penalty_rss: float = 0.0
+    #: Couplings (K element names) fitted with the values (:class:`FrequencyFit`'s ``couplings``).
+    couplings: tuple[str, ...] = ()
 
     @property
     def bic(self) -> float:
@@ -178,6 +186,9 @@ class FrequencyFit:
     prior : DesignPrior, optional
         Log-normal prior of the circuit values around the design (:mod:`.prior`);
         its penalty is added to the residuals.
+    couplings : sequence of str
+        K elements (numeric values) fitted too, as ``ln((1 - k) / (1 - k_0))``
+        (the others stay at their values).
     """
 
     def __init__(
@@ -190,6 +201,7 @@ class FrequencyFit:
         effects: Sequence[Effect] = (),
         scale: float = 1.0,
         prior: DesignPrior | None = None,
+        couplings: Sequence[str] = (),
     ):
         self.effects = list(effects)
         self.configurations = list(configurations)
@@ -227,8 +239,17 @@ class FrequencyFit:
         self.free = [n for n in self.circuit.free_names() if n.lower() not in fixed_keys
                      and not (self.circuit.has_element(n) and self.circuit.element(n).kind == "K")]
         base = self.circuit.resolve(check=False)
+        free_k = {n.lower() for n in fixed} | {n.lower() for n in self.free}
+        self.couplings = tuple(dict.fromkeys(
+            self.circuit.element(n).name for n in couplings
+            if self.circuit.has_element(n) and self.circuit.element(n).kind == "K" and n.lower() not in free_k
+            and not isinstance(self.circuit.element(n).value, Expression) and 0 <= float(base[n.lower()]) < 1))
+        self.free += list(self.couplings)
+        #: Columns of the circuit values that are couplings (fitted as ln((1 - k) / (1 - k0))).
+        self.is_k = np.array([i >= len(self.free) - len(self.couplings) for i in range(len(self.free))], bool)
         env = self.circuit.parameter_values()
         self.start = np.array([float(env[n.lower()]) if n.lower() in env else float(base[n.lower()]) for n in self.free])
+        self._k_elements = [self.circuit.element(n) for n in self.couplings]
         self.extra = [(j, p) for j, e in enumerate(self.effects) for p in e.parameters]
         self.nc = len(self.free)
         n_points = sum(self.f.size for _ in self.measured)
@@ -273,8 +294,16 @@ class FrequencyFit:
         return (self._plog + X[:, self._pidx]) * self._pscale
 
     # ------------------------------------------------------------------ model
+    def values_of(self, Xc: np.ndarray) -> np.ndarray:
+        """Circuit values (SI; couplings as ``k``) of the circuit part ``Xc`` (..., nc) of parameter vectors."""
+        Xc = np.asarray(Xc, float)
+        v = self.start * np.exp(Xc)
+        if self.couplings:
+            v = np.where(self.is_k, 1 - (1 - self.start) * np.exp(Xc), v)
+        return v
+
     def overrides(self, x: np.ndarray) -> dict[str, float]:
-        return {n: float(v) for n, v in zip(self.free, self.start * np.exp(x[: self.nc]))}
+        return {n: float(v) for n, v in zip(self.free, self.values_of(x[: self.nc]))}
 
     def effect_params(self, X: np.ndarray) -> list[dict[str, np.ndarray]]:
         """Per effect, its parameters as arrays over the rows of ``X``."""
@@ -291,9 +320,14 @@ class FrequencyFit:
         key = Xc.tobytes()
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1], self._cache[2]
-        over = {n: self.start[i] * np.exp(Xc[:, i]) for i, n in enumerate(self.free)}
+        V = self.values_of(Xc)
+        over = {n: V[:, i] for i, n in enumerate(self.free)}
         values = self.circuit.resolve(over, check=False)
         T = [m.transfer(values, self.s) for m in self.models]
+        if self.couplings:  # a coupling step that makes the inductance matrix indefinite: no response
+            bad = ~(np.atleast_1d(self.circuit.smallest_inductance_eigenvalue(values)) > 0)
+            if np.any(bad):
+                T = [np.where(bad.reshape((-1,) + (1,) * (t.ndim - 1)), np.nan, t) for t in T]
         if Xc.shape[0] == 1:
             self._cache = (key, T, values)
         return T, values
@@ -368,8 +402,13 @@ class FrequencyFit:
 
     # ------------------------------------------------------------------ fitting
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of the parameter vector: circuit values within a factor 100 of their start (a coupling's
+        leakage ``1 - k`` too, and ``k >= 0``), the effects' parameters within theirs."""
+        top = np.full(self.nc, np.log(100.0))
+        if self.couplings:
+            top = np.where(self.is_k, np.minimum(top, -np.log(np.maximum(1 - self.start, 1e-12))), top)
         lo = [-np.log(100.0)] * self.nc + [np.log(p.lower) if p.log else p.lower for _, p in self.extra]
-        hi = [np.log(100.0)] * self.nc + [np.log(p.upper) if p.log else p.upper for _, p in self.extra]
+        hi = list(top) + [np.log(p.upper) if p.log else p.upper for _, p in self.extra]
         return np.array(lo), np.array(hi)
 
     def start_vectors(self, extra_starts: Sequence[Sequence[Mapping[str, float]]] | None = None) -> np.ndarray:
@@ -503,4 +542,5 @@ class FrequencyFit:
             cost=cost, rss=rss, n_residuals=n_res, n_params=self.nc + len(self.extra),
             predicted=pred, errors=err, nfev=nfev, wall_s=wall, causes=causes, effects=list(self.effects),
             params=params, x=np.asarray(x, float), penalty=penalty, penalty_rss=penalty * self.f.size,
+            couplings=self.couplings,
         )

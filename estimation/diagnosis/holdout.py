@@ -26,10 +26,12 @@ def _refit_score(r: FitResult, configs: Sequence[Configuration], f: np.ndarray, 
     circuit = r.fitted_circuit()
     nc = r.x.size - sum(len(e.parameters) for e in r.effects)
     tail = r.x[nc:]
-    fit = FrequencyFit(circuit, configs, f[train], {k: v[train] for k, v in data.items()}, fixed, r.effects, scale)
+    fit = FrequencyFit(circuit, configs, f[train], {k: v[train] for k, v in data.items()}, fixed, r.effects, scale,
+                       couplings=r.couplings)
     x0 = np.concatenate([np.zeros(fit.nc), tail])
     res = fit.fit(x0s=x0[None], grid=False, max_nfev=max_nfev, tol=1e-7)
-    held = FrequencyFit(circuit, configs, f[test], {k: v[test] for k, v in data.items()}, fixed, r.effects, scale)
+    held = FrequencyFit(circuit, configs, f[test], {k: v[test] for k, v in data.items()}, fixed, r.effects, scale,
+                        couplings=r.couplings)
     return held.result(res.x).cost
 
 

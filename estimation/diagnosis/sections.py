@@ -17,6 +17,12 @@ mutual equals the old inductance, couplings to the rest scaled so the
 common mode is unchanged), so the split circuit starts where the baseline
 ended. Every new inductance matrix is checked to be positive definite (new
 couplings shrunk until it is).
+
+A new section changes the leakage between the sections it touches: the
+tight couplings (``k >= 0.9``, windings on one core) of the changed
+inductors (the split section's two halves, the added section and its
+neighbour) to every other inductor are named in the candidate
+(:attr:`SectionCandidate.couplings`), for the fit to free them.
 """
 
 from __future__ import annotations
@@ -212,6 +218,26 @@ class SectionCandidate:
     how: str
     new_elements: list[str]
     port: str = ""
+    #: K elements whose coupling the change touches (fitted with the new elements).
+    couplings: list[str] = field(default_factory=list)
+
+
+#: Couplings at least this tight are freed by a new section (:func:`touched_couplings`).
+TIGHT_COUPLING = 0.9
+
+
+def touched_couplings(circuit: Circuit, inductors: Sequence[str], tight: float = TIGHT_COUPLING) -> list[str]:
+    """Numeric K elements of ``circuit`` that couple one of ``inductors`` to any inductor at ``k >= tight``.
+
+    Only tight couplings are freed: where the leakage ``1 - k`` is small, a
+    change of ``k`` by a fraction of a per cent changes it by tens of per
+    cent, which no split with the couplings held can follow; looser
+    couplings (a winding's sections among themselves) follow the winding's
+    coupling profile.
+    """
+    names = {n.lower() for n in inductors}
+    return [k.name for k in circuit.of_kind("K") if not isinstance(k.value, Expression)
+            and names & {n.lower() for n in k.nodes} and float(k.value) >= tight]
 
 
 def _couple_new(c: Circuit, new_l: str, partners: Mapping[str, float]) -> list[str]:
@@ -277,7 +303,8 @@ def split_section(circuit: Circuit, chain: Chain, j: int, rho: float, shunt_scal
     new_k = _couple_new(c, new_l, partners)
     new_k += [k.name for k in c.of_kind("K") if old_l in {n.lower() for n in k.nodes} and k.name not in new_k]
     c = _make_pd(c, new_k)
-    return SectionCandidate(c, f"split section {j + 1} of the winding at {chain.port}", new, chain.port)
+    return SectionCandidate(c, f"split section {j + 1} of the winding at {chain.port}", new, chain.port,
+                            touched_couplings(c, [sec.inductor, new_l]))
 
 
 def _mean_shunt(circuit: Circuit, chain: Chain, values: Mapping[str, float]) -> float:
@@ -341,13 +368,14 @@ def add_section(circuit: Circuit, chain: Chain, at: str, rho: float, l_scale: fl
     new_k = _couple_new(c, new_l, partners)
     c = _make_pd(c, new_k)
     where = "at the port end" if at == "port" else "at the far end"
-    return SectionCandidate(c, f"new section {where} of the winding at {chain.port}", new, chain.port)
+    return SectionCandidate(c, f"new section {where} of the winding at {chain.port}", new, chain.port,
+                            touched_couplings(c, [new_l, nb.inductor]))
 
 
 def section_candidates(circuit: Circuit, ports: Sequence[str], grid: Sequence[float] = (0.3, 1.0, 3.0)
                        ) -> list[SectionCandidate]:
     """Every split (with a small and a typical shunt capacitor) and every end addition (over a grid of
-    inductance scales) for every chain."""
+    inductance scales; none for an empty ``grid``) for every chain."""
     chains = find_chains(circuit, ports)
     values = circuit.resolve(check=False)
     rho = coupling_decay(circuit, chains, values)

@@ -24,6 +24,11 @@ natural frequency more in the band), the search here starts elsewhere:
    resonances of their responses sit on the measured ones
    (:func:`resonance_score`), and by cost; the best few are fitted in full.
 
+4. *Couplings.* The seeds are fitted with the couplings as designed; the
+   best is then refitted with the couplings of the two sections free
+   (:mod:`.sections`), while its fit with the designed couplings is the one
+   merged back to refit the baseline (which keeps its couplings).
+
 Whether any of this is tried is decided by :func:`missing_modes` (measured
 resonances the fitted baseline lacks), so data without a missing mode cost
 nothing extra.
@@ -42,7 +47,7 @@ from pris_cosim.expressions import Expression
 
 from ..resonances import find_resonances
 from .sections import (Chain, SectionCandidate, _make_pd, _unique, coupling_decay, coupling_matrix, find_chains,
-                       split_section)
+                       split_section, touched_couplings)
 
 #: A measured resonance farther than this (relative frequency) from every model resonance counts as missing.
 MODE_TOLERANCE = 0.04
@@ -228,7 +233,8 @@ class Unmerged:
             new.append(first_c)
         c = _make_pd(c, new_k)
         self.candidate = SectionCandidate(c, f"section {j + 1} of the winding at {chain.port} is two sections",
-                                          new, chain.port)
+                                          new, chain.port, touched_couplings(c, [sec.inductor, new_l]))
+        self.k_name = next((e.name for e in c.of_kind("K") if {n.lower() for n in e.nodes} == {old_l, new_l}), None)
         self.first = {"L": sec.inductor, "R": sec.resistor, "C": first_c}
         self.second = {"L": next(n for n in new if n[0].upper() == "L"),
                        "R": next((n for n in new if n[0].upper() == "R"), None),
@@ -252,7 +258,8 @@ class Unmerged:
         v = fitted.resolve(check=False)
         get = lambda n: float(v[n.lower()])  # noqa: E731
         l1, l2 = get(self.first["L"]), get(self.second["L"])
-        out = {self.first["L"]: l1 + l2 + 2 * self.k_in * np.sqrt(l1 * l2)}
+        k_in = get(self.k_name) if self.k_name else self.k_in  # the fitted coupling between the two halves
+        out = {self.first["L"]: l1 + l2 + 2 * k_in * np.sqrt(l1 * l2)}
         if self.first["R"] and self.second["R"]:
             out[self.first["R"]] = get(self.first["R"]) + get(self.second["R"])
         if self.own_c and self.second["C"]:
@@ -308,15 +315,19 @@ def unmerged_candidates(nominal: Circuit, ports: Sequence[str]) -> list[Unmerged
 
 def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np.ndarray], nominal: Circuit,
                     ports: Sequence[str], tail: np.ndarray, by_resonance: int = 2, by_cost: int = 0,
-                    screen_nfev: int = 15, max_nfev: int = 80):
-    """Fit every un-merged candidate from its best seeds; return the best fit and its candidate (or ``None``).
+                    screen_nfev: int = 15, max_nfev: int = 80, coupling_nfev: int = 60, free_couplings: bool = True):
+    """Fit every un-merged candidate from its best seeds; the best fit, its candidate and the fit to merge back.
+
+    The seeds are fitted with the couplings as designed (the baseline's
+    own: the fit whose two sections merged back refit the baseline), the
+    best of them then with the couplings the split touches free too.
 
     Parameters
     ----------
     make_fit : callable
-        ``make_fit(circuit)`` gives the :class:`.fit.FrequencyFit` of a
-        candidate circuit (with the effects already named, whose fitted
-        parameters are ``tail``).
+        ``make_fit(circuit, couplings)`` gives the :class:`.fit.FrequencyFit` of a
+        candidate circuit with those couplings free (with the effects already
+        named, whose fitted parameters are ``tail``).
     f : numpy.ndarray, Hz
     measured : mapping
         Response name to complex values.
@@ -328,16 +339,24 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
     by_resonance, by_cost : int
         Seeds fitted per candidate: the best by :func:`resonance_score`, then
         the best by cost among the rest.
-    screen_nfev, max_nfev : int
-        Evaluations of the short fits of every seed kept, and of the final fit
-        of the best.
+    screen_nfev, max_nfev, coupling_nfev : int
+        Evaluations of the short fits of every seed kept, of the final fit
+        of the best, and of its fit with the couplings free.
+    free_couplings : bool
+        Refit the best with the couplings the split touches free.
+
+    Returns
+    -------
+    tuple or None
+        ``(fit, candidate, merged)``: the best fit (couplings free), its
+        :class:`Unmerged` and the fit with the couplings as designed.
     """
     from .fit import DiagnosisError
 
     screened = []
     for um in unmerged_candidates(nominal, ports):
         try:
-            fit = make_fit(um.candidate.circuit)
+            fit = make_fit(um.candidate.circuit, ())
             rows = um.seeds(fit.free, tail)
             pred = fit.predict_batch(rows)
             r = fit.residuals_batch(rows)
@@ -361,4 +380,16 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         res = fit.fit(x0s=first.x[None], grid=False, max_nfev=max_nfev, tol=1e-7)
     except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
         res = first
-    return (res if res.cost < first.cost else first), um
+    res = res if res.cost < first.cost else first
+    merged = res
+    if free_couplings and um.candidate.couplings:  # then the couplings the split touches, from there
+        try:
+            loose = make_fit(res.fitted_circuit(), um.candidate.couplings)
+            nc = res.x.size - sum(len(e.parameters) for e in res.effects)
+            x0 = np.concatenate([np.zeros(loose.nc), res.x[nc:]])
+            refined = loose.fit(x0s=x0[None], grid=False, max_nfev=coupling_nfev, tol=1e-7)
+            if refined.objective < res.objective:
+                res = refined
+        except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
+            pass
+    return res, um, merged
