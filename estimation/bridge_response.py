@@ -428,7 +428,7 @@ def may_alias(proxy: DiscreteBridgeResponse, params: ParameterSet, fs: float, po
     ``fs / 2``. Only then does a mode seen in the samples have several branches, each a basin of
     the stand-in, and stage 1 needs its least-squares starts.
     """
-    from .optimisers import _latin_hypercube
+    from .optimisers_population import _latin_hypercube
 
     n = len(params.varying)
     U = np.vstack([np.full((1, n), 0.5), _latin_hypercube(np.random.default_rng(0), points, n)])

@@ -106,7 +106,7 @@ def _least_squares_starts(proxy: ap.Approach, x: np.ndarray, f: float, starts: i
     x, cost, evaluations, note
     """
     from .local_search import batched_least_squares
-    from .optimisers import _latin_hypercube
+    from .optimisers_population import _latin_hypercube
 
     X0 = np.vstack([x[None], _latin_hypercube(np.random.default_rng(seed), int(starts), x.size)])
     X, c, nfev = batched_least_squares(proxy.residuals, X0, iterations=iterations, max_time_s=max_time_s)
