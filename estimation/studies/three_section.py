@@ -103,7 +103,7 @@ from pris_cosim.arrangement import SourceSettings
 from pris_cosim.models import get_model
 
 from .. import approaches as ap
-from .. import costs, local_search
+from .. import costs
 from ..executor import Task
 from ..optimisers import Budget, minimize
 from ..parameters import ParameterSet
@@ -503,7 +503,9 @@ def _run_one(approach: str, optimiser: str, metric: str, quick: bool = True, see
         if guide.f_t.size >= MODAL_MIN_MODES:
             return _run_modal(a, params, approach, optimiser, metric, quick, seed, snr_db, plan, cost_at_target, t0,
                               guide)
-        return _run_unguided(a, params, approach, optimiser, metric, quick, seed, snr_db, plan, cost_at_target, t0)
+        from .three_section_unguided import run_unguided
+
+        return run_unguided(a, params, approach, optimiser, metric, quick, seed, snr_db, plan, cost_at_target, t0)
     if approach == "frequency" and metric == "rmse":
         from .three_section_frequency import run_frequency_staged
 
@@ -650,15 +652,7 @@ def _run_modal(a: ap.Approach, params: ParameterSet, approach: str, optimiser: s
         p1b = common.least_squares_polish(fit, x1, max_nfev=n_fit, max_time_s=plan["polish_time_s"])
         nfev += int(p1b["nfev"])
         x = np.asarray(p1b["x"])
-        if own_ls:
-            p2 = common.least_squares_polish(a, x, max_nfev=plan["polish_iterations"], max_time_s=plan["polish_time_s"])
-            x, n2 = np.asarray(p2["x"]), int(p2["nfev"])
-        else:
-            box = modal.Box(x, LOCAL_BOX)
-            r2 = minimize(lambda U: a.cost_batch(box.to_outer(U)), a.n, method="local", seed=seed,
-                          x0=box.to_inner(x), budget=Budget(max_evals=m["own_local_evals"]),
-                          options={"max_iter": 200})
-            x, n2 = box.to_outer(np.asarray(r2.x)[None])[0], int(r2.nfev)
+        x, n2 = _own_cost_stage(a, x, own_ls, plan, seed)
         c = float(a.cost_batch(x[None])[0])
         nfev += n2 + 1
         trace.append([float(nfev), min(c, best_c)])
@@ -688,68 +682,18 @@ def _run_modal(a: ap.Approach, params: ParameterSet, approach: str, optimiser: s
     }
 
 
-def _run_unguided(a: ap.Approach, params: ParameterSet, approach: str, optimiser: str, metric: str, quick: bool,
-                  seed: int, snr_db: Level, plan: dict[str, Any], cost_at_target: float, t0: float
-                  ) -> dict[str, Any]:
-    """Time, EMD, IEMD when the record shows fewer than :data:`MODAL_MIN_MODES` modes (behind an anti-alias
-    filter): the voltage fit restarted (the optimiser + local, least squares), its :data:`PROFILED`
-    worst-determined parameters profiled in turn (:func:`estimation.local_search.profile_scan`), then the
-    approach's own cost as in :func:`_run_modal`."""
-    m = plan["modal"]
-    vplan = optimiser_settings("time", optimiser, quick)  # the voltage fit's budgets, whatever the approach
-    own_ls = metric == "rmse" and approach in ("time", "iemd")
-    volt = a if approach == "time" and metric == "rmse" else build_approach("time", "rmse", params, snr_db, seed)
-    best_x, best_c, nfev, notes = None, math.inf, 0, []
-    for k in range(m["restarts"]):
-        res, _ = common.optimise(volt, vplan["method"], 1000 * seed + k, vplan["budget"], vplan["options"])
-        pol = common.least_squares_polish(volt, res.x, max_nfev=vplan["polish_iterations"],
-                                          max_time_s=vplan["polish_time_s"])
-        nfev += int(res.nfev) + int(pol["nfev"])
-        c = float(volt.cost_batch(np.asarray(pol["x"])[None])[0])
-        notes.append(f"start {k + 1}: voltage cost {c:.4g}")
-        if c < best_c:
-            best_x, best_c = np.asarray(pol["x"]), c
-    assert best_x is not None
-    x = best_x
-    for k_p in local_search.sloppy_parameters(volt, best_x, PROFILED):
-        prof = local_search.profile_scan(volt, x, k_p)
-        nfev += int(prof["nfev"]) + volt.n + 1
-        c_prof = float(volt.cost_batch(np.asarray(prof["x"])[None])[0])
-        notes.append(f"profile of {NAMES[k_p]}: voltage cost {best_c:.4g} -> {min(c_prof, best_c):.4g}")
-        if c_prof < best_c:
-            x, best_c = np.asarray(prof["x"]), c_prof
-    if a is not volt:
-        if own_ls:
-            p2 = common.least_squares_polish(a, x, max_nfev=plan["polish_iterations"], max_time_s=plan["polish_time_s"])
-            x, n2 = np.asarray(p2["x"]), int(p2["nfev"])
-        else:
-            box = modal.Box(x, LOCAL_BOX)
-            r2 = minimize(lambda U: a.cost_batch(box.to_outer(U)), a.n, method="local", seed=seed,
-                          x0=box.to_inner(x), budget=Budget(max_evals=m["own_local_evals"]),
-                          options={"max_iter": 200})
-            x, n2 = box.to_outer(np.asarray(r2.x)[None])[0], int(r2.nfev)
-        nfev += n2
-    cost = float(a.cost_batch(x[None])[0])
-    values = params.values(x)
-    est = {k: float(values[k]) for k in NAMES}
-    errors = common.errors_percent(est, TARGET)
-    wall = time.perf_counter() - t0
-    second = "" if a is volt else (" -> least squares on the cost's residuals" if own_ls else
-                                    " -> local solver on the cost")
-    method = (f"{m['restarts']} x [{vplan['method']} on the voltage -> least squares]; lowest kept; its "
-              f"{PROFILED} worst-determined parameters profiled{second} (fewer than {MODAL_MIN_MODES} modes in the "
-              "record)")
-    return {
-        "study": NAME, "case": case_key(approach, optimiser, metric, snr_db), "approach": approach,
-        "optimiser": optimiser, "cost_function": metric, "snr_db": snr_db, "drive": "bridge", "engine": a.engine,
-        "errors_percent": errors, "estimate": est, "success": cells.success(errors),
-        "success_rate": float(cells.success(errors)), "within_10pct": int(sum(abs(e) < 10 for e in errors.values())),
-        "non_identifiable": [], "cost": cost, "cost_at_target": cost_at_target, "wall_s": wall, "nfev": nfev,
-        "evaluations": nfev, "evals_per_s": nfev / max(wall, 1e-9), "per_eval_s": a.stats.per_eval_s,
-        "optimiser_message": "; ".join(notes), "method": method, "trace": [[float(nfev), cost]],
-        "settings": {"quick": quick, "seed": seed, "method": method, "restarts": m["restarts"],
-                     "max_evals": plan["budget"].max_evals, "polish_iterations": plan["polish_iterations"]},
-    }
+def _own_cost_stage(a: ap.Approach, x: np.ndarray, own_ls: bool, plan: dict[str, Any], seed: int
+                    ) -> tuple[np.ndarray, int]:
+    """The approach's own cost from the voltage fit ``x``: least squares on its residuals (RMSE-type time and
+    IEMD costs), else the local solver inside a box of :data:`LOCAL_BOX` around ``x``; ``(x, evaluations)``."""
+    if own_ls:
+        p2 = common.least_squares_polish(a, x, max_nfev=plan["polish_iterations"], max_time_s=plan["polish_time_s"])
+        return np.asarray(p2["x"]), int(p2["nfev"])
+    box = modal.Box(x, LOCAL_BOX)
+    r2 = minimize(lambda U: a.cost_batch(box.to_outer(U)), a.n, method="local", seed=seed,
+                  x0=box.to_inner(x), budget=Budget(max_evals=plan["modal"]["own_local_evals"]),
+                  options={"max_iter": 200})
+    return box.to_outer(np.asarray(r2.x)[None])[0], int(r2.nfev)
 
 
 def case_key(approach: str, optimiser: str, metric: str, snr_db: float | None = None) -> str:
