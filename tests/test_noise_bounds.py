@@ -95,29 +95,33 @@ def test_record_modes_of_the_three_section_target_are_its_arrangement_modes():
         assert np.min(np.abs(f_arr - f)) < 1e-6 * f
 
 
-@pytest.mark.slow
-def test_bound_agrees_with_the_monte_carlo_spread_on_the_two_section_model():
-    """20 noise draws on the two-section PRIS voltage record; least squares from the truth per draw (the
-    maximum-likelihood estimate for white Gaussian noise); its spread against the Cramer-Rao bound."""
-    params = two.make_params()
-    circuit = get_model(two.NAME).circuit
-    fs, n = 100e3, 4000
-    engine = ap.PrisEngine(circuit, two.PORT, two.SOURCE, fs, n, probes=[])
-    truth = {k: two.TARGET[k] for k in params.varying}
+def _bound_and_spread(study, fs: float, n: int, source, draws: int, seed: int):
+    """The Cramer-Rao bound of a study's PRIS voltage record at 40 dB, and the spread of least-squares estimates
+    from the truth (the maximum-likelihood estimate for white Gaussian noise) over ``draws`` noise draws."""
+    params = study.make_params()
+    engine = ap.PrisEngine(get_model(study.NAME).circuit, study.PORT, source, fs, n, probes=[])
+    truth = {k: study.TARGET[k] for k in params.varying}
     u0 = params.to_unit(truth)
     v0 = engine.simulate(params.evaluate(u0[None]).overrides)["v_in"][0]
     sigma = bounds.noise_sigma(v0, 40.0)
     bound = bounds.cramer_rao(three.BridgeTime(params, engine, v0, "rmse").residuals, params, truth, sigma)
-    rng = np.random.default_rng(11)
+    rng = np.random.default_rng(seed)
     errors = []
-    for _ in range(20):
-        a = three.BridgeTime(params, engine, v0 + sigma * rng.standard_normal(n), "rmse")
+    for _ in range(draws):
+        a = three.BridgeTime(params, engine, v0 + sigma * rng.standard_normal(v0.size), "rmse")
         fit = least_squares(lambda x: a.residuals(np.clip(x, 0, 1)[None])[0], u0, bounds=(0, 1), x_scale="jac",
                             diff_step=1e-7, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         est = params.values(fit.x)
         errors.append([(float(est[k]) - truth[k]) / truth[k] * 100.0 for k in params.varying])
-    spread = np.std(np.array(errors), axis=0, ddof=1)
-    for k, s in zip(params.varying, spread):
+    return params.varying, bound, np.std(np.array(errors), axis=0, ddof=1)
+
+
+@pytest.mark.slow
+def test_bound_agrees_with_the_monte_carlo_spread_on_the_two_section_model():
+    """20 noise draws on the two-section PRIS voltage record; least squares from the truth per draw; its spread
+    against the Cramer-Rao bound."""
+    names, bound, spread = _bound_and_spread(two, 100e3, 4000, two.SOURCE, 20, 11)
+    for k, s in zip(names, spread):
         assert s == pytest.approx(bound[k], rel=0.3), (k, s, bound[k])
 
 
@@ -125,26 +129,9 @@ def test_bound_agrees_with_the_monte_carlo_spread_on_the_two_section_model():
 def test_bound_of_the_ill_conditioned_three_section_record_follows_the_monte_carlo_spread():
     """The three-section winding's voltage record (one PRBS6 period at 11 MHz, 40 dB): its Jacobian spans six
     decades of singular values, and the sloppy combination (Cs, Cg, k12) must get the bound the estimates'
-    spread shows (a too coarse difference step once made it 13 times too small). 16 noise draws, least squares
-    from the truth per draw."""
-    params = three.make_params()
-    circuit = get_model(three.NAME).circuit
-    engine = ap.PrisEngine(circuit, three.PORT, three.SOURCE_TIME, three.FS_TIME, 6930, probes=[])
-    truth = {k: three.TARGET[k] for k in params.varying}
-    u0 = params.to_unit(truth)
-    v0 = engine.simulate(params.evaluate(u0[None]).overrides)["v_in"][0]
-    sigma = bounds.noise_sigma(v0, 40.0)
-    bound = bounds.cramer_rao(three.BridgeTime(params, engine, v0, "rmse").residuals, params, truth, sigma)
-    rng = np.random.default_rng(5)
-    errors = []
-    for _ in range(16):
-        a = three.BridgeTime(params, engine, v0 + sigma * rng.standard_normal(v0.size), "rmse")
-        fit = least_squares(lambda x: a.residuals(np.clip(x, 0, 1)[None])[0], u0, bounds=(0, 1), x_scale="jac",
-                            diff_step=1e-7, xtol=1e-12, ftol=1e-12, gtol=1e-12)
-        est = params.values(fit.x)
-        errors.append([(float(est[k]) - truth[k]) / truth[k] * 100.0 for k in params.varying])
-    spread = np.std(np.array(errors), axis=0, ddof=1)
-    for k, s in zip(params.varying, spread):
+    spread shows (a too coarse difference step once made it 13 times too small). 16 noise draws."""
+    names, bound, spread = _bound_and_spread(three, three.FS_TIME, 6930, three.SOURCE_TIME, 16, 5)
+    for k, s in zip(names, spread):
         assert s == pytest.approx(bound[k], rel=0.4), (k, s, bound[k])
 
 
