@@ -156,6 +156,15 @@ class Diagnosis:
         }
 
 
+
+def _refuse(pool: dict[str, Any], failed: list[dict[str, Any]], best: Any, cause: str, progress: bool,
+            message: str, reason: str) -> None:
+    """Refuse a structural candidate: say why on stderr, record it in ``failed``, drop it from ``pool``."""
+    _log(f"{cause}: {message}: refused", progress)
+    failed.append({"cause": cause, "cost": best.cost, "reason": reason})
+    pool.pop(best.cause if best.cause in pool else cause)
+
+
 def _log(msg: str, progress: bool) -> None:
     if progress:
         print(f"diagnose: {msg}", file=sys.stderr, flush=True)
@@ -401,21 +410,17 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             new_causes[0]
         if new_cause in STRUCTURAL:
             if getattr(best, "from_design", False) and best.objective > UNMERGE_ABOVE_FLOOR * floor["cost"]:
-                _log(f"{new_cause}: a split of the design values that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise: "
-                     "refused", progress)
-                failed.append({"cause": new_cause, "cost": best.cost,
-                               "reason": "a split of the design values with its couplings free, and the fit with it "
-                                         "stays far above the noise"})
-                pool.pop(best.cause if best.cause in pool else new_cause)
+                _refuse(pool, failed, best, new_cause, progress,
+                        f"a split of the design values that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise",
+                        "a split of the design values with its couplings free, and the fit with it stays far above "
+                        "the noise")
                 continue
             if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
                     and not missing_modes(f, data, current.predicted)):
-                _log(f"{new_cause}: the model without it has every measured resonance and the split does not reach "
-                     "the noise: refused", progress)
-                failed.append({"cause": new_cause, "cost": best.cost,
-                               "reason": "no measured resonance missing from the model without it, and the fit with "
-                                         "it stays above the noise"})
-                pool.pop(best.cause if best.cause in pool else new_cause)
+                _refuse(pool, failed, best, new_cause, progress,
+                        "the model without it has every measured resonance and the split does not reach the noise",
+                        "no measured resonance missing from the model without it, and the fit with it stays above "
+                        "the noise")
                 continue
             try:
                 held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale)
