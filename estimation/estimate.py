@@ -40,11 +40,8 @@ polish and restarts stay.
 
 from __future__ import annotations
 
-import math
-import sys
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -52,7 +49,7 @@ import numpy as np
 from . import approaches as ap
 from .optimisers import Budget, minimize
 from .parameters import ParameterSet
-from .verdict import agreement_tolerance, residual_noise, residual_tolerance, verdict
+from .recipe import End, Outcome, Start, run_recipe
 
 #: Ties assumed when a config names neither parameters nor ties: the thesis's estimation vectors
 #: (two-section 4.1.3: R2 = R1, C2 = C1) and, for the 4-section cascade, the uniform winding of the
@@ -136,22 +133,91 @@ def default_plan(n: int, per_eval_s: float | None = None) -> dict[str, Any]:
             "restarts": restarts, "max_restarts": 2 * restarts + 2, "polish_iterations": 30 + 10 * n}
 
 
-@dataclass
-class Outcome:
-    """Result of :func:`run_plan`."""
+class ApproachKind:
+    """A built-in model or netlist scored by an approach: the stages of :func:`estimation.recipe.run_recipe`.
 
-    x: np.ndarray
-    cost: float
-    nfev: int
-    message: str
-    verdict: dict[str, Any]
-    ends: list[tuple[np.ndarray, float]] = field(default_factory=list)
-    stages: list[dict[str, Any]] = field(default_factory=list)
+    - start ``k``: the plan's global search (``plan["method"]``, seed ``seed + k``) on the stand-in
+      ``proxy`` (or the approach), then, when the stand-in asks for them, the Levenberg-Marquardt
+      starts of :func:`_least_squares_starts`;
+    - descend: the trust-region least-squares polish on the approach's own residuals
+      (``plan["polish_iterations"]`` evaluations; the final polish twice that).
 
+    Parameters
+    ----------
+    approach : Approach
+        The reported and polished cost.
+    params : ParameterSet
+    data : numpy.ndarray
+        The compared data (noise floor and scale of the verdict).
+    plan : mapping
+        :func:`default_plan` keys.
+    proxy : Approach, optional
+        Stand-in cost of stage 1.
+    seed : int
+        Restart ``k`` uses seed ``seed + k``.
+    time_limit_s : float, optional
+        Wall-time limit of the whole recipe (each restart's global search gets a share of what is left).
+    """
 
-def _rms(approach: ap.Approach, x: np.ndarray) -> float:
-    r = np.asarray(approach.residuals(np.asarray(x, float)[None]), float)[0]
-    return float(np.sqrt(np.mean(r ** 2))) if r.size and np.all(np.isfinite(r)) else math.inf
+    def __init__(self, approach: ap.Approach, params: ParameterSet, data: np.ndarray, plan: Mapping[str, Any],
+                 proxy: ap.Approach | None = None, seed: int = 1, time_limit_s: float | None = None):
+        self.approach, self.params, self._data, self.plan = approach, params, data, dict(plan)
+        self.first = proxy or approach
+        self.seed, self.time_limit_s, self.t0 = int(seed), time_limit_s, time.perf_counter()
+        self.verdict_options: dict[str, Any] = {}
+
+    def _left(self) -> float | None:
+        if self.time_limit_s is None:
+            return None
+        return max(1.0, self.time_limit_s - (time.perf_counter() - self.t0))
+
+    def data(self) -> np.ndarray:
+        return self._data
+
+    def residuals(self, U: np.ndarray) -> np.ndarray:
+        return self.approach.residuals(U)
+
+    def start(self, k: int) -> Start:
+        plan, first = self.plan, self.first
+        budget = plan["budget"]
+        left = self._left()
+        if left is not None:
+            budget = Budget(max_evals=budget.max_evals, max_time_s=left / max(1, int(plan["restarts"]) - k))
+        r1 = minimize(first.cost_batch, first.n, method=plan["method"], seed=self.seed + k, budget=budget,
+                      options=dict(plan["options"]))
+        x, f1, msg = np.asarray(r1.x, float), float(r1.fun), r1.message
+        runs = {"stand-in search" if first is not self.approach else "global search": int(r1.nfev)}
+        starts = int(plan.get("least_squares_starts", getattr(first, "least_squares_starts", 0)))
+        if starts > 0:
+            x, f1, n_ms, note = _least_squares_starts(
+                first, x, f1, starts, self.seed + k, int(plan.get("least_squares_iterations", LSQ_ITERATIONS)),
+                self._left())
+            runs["least-squares starts"] = int(n_ms)
+            msg = f"{msg}; {note}"
+        return Start(x, f1, runs, msg, {"seed": self.seed + k})
+
+    def descend(self, starts: Sequence[tuple[int, Start]]) -> list[End]:
+        from .local_search import least_squares_polish
+
+        out = []
+        for _, s in starts:
+            x, runs, msg = s.x, dict(s.runs), s.message
+            if int(self.plan["polish_iterations"]) > 0:
+                pol = least_squares_polish(self.approach, x, max_nfev=int(self.plan["polish_iterations"]),
+                                           max_time_s=self._left())
+                x, runs["least squares"] = np.asarray(pol["x"], float), int(pol["nfev"])
+                msg = f"{msg}; then least squares: {pol['message']}"
+            out.append(End(x, float(self.approach.cost_batch(x[None])[0]), runs, msg))
+        return out
+
+    def polish(self, x: np.ndarray) -> tuple[np.ndarray, float, int, str] | None:
+        from .local_search import least_squares_polish
+
+        if int(self.plan["polish_iterations"]) <= 0:
+            return None
+        pol = least_squares_polish(self.approach, x, max_nfev=2 * int(self.plan["polish_iterations"]))
+        z = np.asarray(pol["x"], float)
+        return z, float(self.approach.cost_batch(z[None])[0]), int(pol["nfev"]), str(pol["message"])
 
 
 def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed: int = 1,
@@ -159,6 +225,9 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
              time_limit_s: float | None = None, progress: bool = True,
              noise: float | None = None) -> Outcome:
     """Run the recipe on ``approach`` (stage 1 on ``proxy`` when given) and judge the answer.
+
+    The stages are :class:`ApproachKind`'s, in the order and with the restart rule of
+    :func:`estimation.recipe.run_recipe`.
 
     Parameters
     ----------
@@ -184,76 +253,10 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
     -------
     Outcome
     """
-    from .local_search import least_squares_polish
-
     plan = dict(plan or default_plan(approach.n))
-    first = proxy or approach
-    t0 = time.perf_counter()
-    ends: list[tuple[np.ndarray, float]] = []
-    stages: list[dict[str, Any]] = []
-    nfev = 0
-    best_x, best_c, message = None, math.inf, ""
-    noise0, scale0, floor = residual_tolerance(data, noise)  # the verdict's own "explains the data" level
-    reach = floor  # the level two restarts must reach (the best restart's own noise when the data's is signal)
-    more = int(plan.get("max_restarts", plan["restarts"]))
-    for k in range(max(int(plan["restarts"]), more)):
-        if time_limit_s is not None and k > 0 and time.perf_counter() - t0 > time_limit_s:
-            break
-        if k >= int(plan["restarts"]) and sum(e[1] <= reach for e in ends) >= 2:
-            break  # two restarts reached the noise floor (and can tell whether the answer is unique)
-        budget = plan["budget"]
-        if time_limit_s is not None:
-            left = max(1.0, time_limit_s - (time.perf_counter() - t0))
-            budget = Budget(max_evals=budget.max_evals, max_time_s=left / max(1, int(plan["restarts"]) - k))
-        r1 = minimize(first.cost_batch, first.n, method=plan["method"], seed=seed + k, budget=budget,
-                      options=dict(plan["options"]))
-        x = np.asarray(r1.x, float)
-        n_pol, f1 = 0, float(r1.fun)
-        msg = r1.message
-        starts = int(plan.get("least_squares_starts", getattr(first, "least_squares_starts", 0)))
-        if starts > 0:
-            x, f1, n_ms, note = _least_squares_starts(
-                first, x, f1, starts, seed + k, int(plan.get("least_squares_iterations", LSQ_ITERATIONS)),
-                None if time_limit_s is None else max(1.0, time_limit_s - (time.perf_counter() - t0)))
-            n_pol += n_ms
-            msg = f"{msg}; {note}"
-        if int(plan["polish_iterations"]) > 0:
-            pol = least_squares_polish(approach, x, max_nfev=int(plan["polish_iterations"]),
-                                       max_time_s=None if time_limit_s is None
-                                       else max(1.0, time_limit_s - (time.perf_counter() - t0)))
-            x, n_pol = np.asarray(pol["x"], float), int(pol["nfev"])
-            msg = f"{msg}; then least squares: {pol['message']}"
-        c = float(approach.cost_batch(x[None])[0])
-        nfev += int(r1.nfev) + n_pol + 1
-        res = np.asarray(approach.residuals(x[None]), float)[0]
-        rms = float(np.sqrt(np.mean(res ** 2))) if res.size and np.all(np.isfinite(res)) else math.inf
-        ends.append((x, rms))
-        if noise is None and rms <= min(e[1] for e in ends):
-            # the data's noise reading may be signal (modes above the Nyquist frequency): the best fit's tells
-            sigma = residual_noise(noise0, res)
-            reach = floor if not sigma < noise0 else max(1.5 * rms, agreement_tolerance(floor, noise0, sigma, scale0))
-        stages.append({"restart": k + 1, "seed": seed + k, "stage1_cost": f1, "cost": c,
-                       "residual_rms": rms, "evaluations": int(r1.nfev) + n_pol + 1})
-        if progress:
-            print(f"estimate: restart {k + 1}/{plan['restarts'] if k < int(plan['restarts']) else more}: cost {c:.4g} (residual RMS {rms:.3g}), "
-                  f"{time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
-        if c < best_c or best_x is None:
-            best_x, best_c, message = x, c, msg
-    assert best_x is not None
-    v = verdict(approach.residuals, params, best_x, data, ends, noise=noise)
-    if not v["converged"] and "not at a minimum" in v["convergence_reason"] and int(plan["polish_iterations"]) > 0 \
-            and (time_limit_s is None or time.perf_counter() - t0 < time_limit_s):
-        # the best restart stopped short of its minimum (a flat direction): polish it once more
-        pol = least_squares_polish(approach, best_x, max_nfev=2 * int(plan["polish_iterations"]))
-        x = np.asarray(pol["x"], float)
-        c = float(approach.cost_batch(x[None])[0])
-        nfev += int(pol["nfev"]) + 1
-        if c <= best_c:
-            ends = [(x, _rms(approach, x)) if e[0] is best_x else e for e in ends]
-            best_x, best_c = x, c
-            message += f"; final least squares: {pol['message']}"
-            v = verdict(approach.residuals, params, best_x, data, ends, noise=noise)
-    return Outcome(best_x, best_c, nfev, message, v, ends, stages)
+    kind = ApproachKind(approach, params, data, plan, proxy=proxy, seed=seed, time_limit_s=time_limit_s)
+    return run_recipe(kind, int(plan["restarts"]), int(plan.get("max_restarts", plan["restarts"])), noise=noise,
+                      time_limit_s=time_limit_s, progress=progress)
 
 
 def default_band(model: Any, configuration: Any, override_values: Mapping[str, float] | None = None

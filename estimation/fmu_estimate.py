@@ -27,27 +27,35 @@ distinct levels (a PRBS, a DAC staircase) changes only at sample instants and
 is held over each sample (zero-order hold); any other input varies linearly
 between samples. The answer reports the hold and the reason.
 
-Recipe (few evaluations, each a whole FMU run or a window of one):
+Recipe: the staged recipe of :func:`estimation.recipe.run_recipe`, the one every
+model kind runs (built-in models and netlists through
+:class:`estimation.estimate.ApproachKind`); the FMU's stages
+(:class:`FmuKind`) are made for few evaluations, each a whole FMU run or a
+window of one:
 
-1. a Latin-hypercube design of ``budget.design`` points (default ``10 n + 10``,
+1. start: a Latin-hypercube design of ``budget.design`` points (default ``10 n + 10``,
    :class:`scipy.stats.qmc.LatinHypercube`) in the unit cube (log scale for
    positive bounds), ranked on the record's *responses*: the log-magnitude of
    the Welch H1 responses from the input (or recorded current) to every
    compared output over the whole record (:meth:`~estimation.fmu_problem.FmuProblem.response_target`,
    Hann segments of an 8th of the record), a smooth function of the
-   parameters where the time residual of a long record is a needle;
-2. the *screen*: from the ``budget.candidates`` best design points (default
+   parameters where the time residual of a long record is a needle; then
+   the *screen*: from the ``budget.candidates`` best design points (default
    ``max(2 restarts, n + 2)``), a trust-region least squares
    (:func:`scipy.optimize.least_squares`, ``trf``, two-point finite-difference
    Jacobian, bounds of the cube) on the time residual over doubling first
    windows of the record up to a 32nd of it (cheap runs); a start in a wrong
-   basin ends the screen well above the noise;
-3. the ``budget.restarts`` best screened candidates (those within 1.5 times
-   the best screen cost) continue over the longer windows, the whole record and
-   the approach's own residuals (:mod:`estimation.fmu_problem`);
+   basin ends the screen well above the noise. Restart ``k`` starts from the
+   ``k``-th best screened candidate, while its screen cost is within 1.5
+   times the best one's;
+2. descend: the longer windows, the whole record and the approach's own
+   residuals (:mod:`estimation.fmu_problem`);
+3. restarts: ``budget.restarts`` first (default 3), more while fewer than
+   two reach the noise floor and screened candidates are left;
 4. the verdict of :mod:`estimation.verdict` on the best end point
    (uncertainty from the Fisher information, non-identifiable parameters with
-   the reason, agreement of the restarts).
+   the reason, agreement of the restarts); a best end short of its minimum is
+   polished once more on the whole record.
 
 Budgets: every stage stops when the least squares converges, when its best
 cost fell by less than a 1e-4 fraction over its last ``4 (n + 1)`` runs
@@ -70,7 +78,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -80,8 +88,9 @@ from .fmu_model import FmuSetupError, fmu_variables
 from .fmu_problem import APPROACHES, problem, read_record
 from .holds import HOLDS, decide_hold
 from .local_search import staged_least_squares
+from .recipe import End, Start
 
-__all__ = ["make_setup", "run_fmu_estimate", "design_task", "restart_task"]
+__all__ = ["FmuKind", "design_task", "make_setup", "restart_task", "run_fmu_estimate"]
 
 KNOWN = {"fmu", "input", "output", "outputs", "current", "parameters", "ties", "target", "approach", "frequency",
          "budget", "substeps", "diff_step", "seed", "first_window", "design_score", "window_growth", "values",
@@ -304,6 +313,131 @@ def _out_dir(cfg: Mapping[str, Any], setup: Mapping[str, Any]) -> Path:
     return Path(f"estimate-{Path(setup['fmu']).stem}-{key[:8]}")
 
 
+class FmuKind:
+    """An FMU in the loop: the stages of :func:`estimation.recipe.run_recipe` (module docstring, Recipe).
+
+    - start ``k``: at the first call, the design (ranked on the record's responses) and the screen
+      of the best design points on short windows, each chunk and candidate a task of
+      :func:`estimation.executor.run_tasks`; then the ``k``-th best screened candidate, while its
+      screen cost is within :data:`SCREEN_RATIO` of the best one's (a worse one started in another
+      basin);
+    - descend: the window continuation from each start to the whole record and the approach's own
+      residual, one task per start (parallel, stored, resumed);
+    - polish: the approach's own residual over the whole record once more.
+
+    Parameters
+    ----------
+    setup : dict
+        :func:`make_setup`'s answer.
+    budget : mapping
+        The config's ``budget`` (``design``, ``candidates``, ``restarts``, ``simulations``).
+    seed : int
+        Seed of the Latin-hypercube design.
+    store : path
+        Results directory of the tasks.
+    executor : str
+        ``"processes"``, ``"serial"`` or a Dask address.
+    workers : int, optional
+        Local worker processes.
+    progress : bool
+        One line per finished task on stderr.
+    """
+
+    def __init__(self, setup: dict[str, Any], budget: Mapping[str, Any], seed: int, store: Path, executor: str,
+                 workers: int | None, progress: bool):
+        self.setup, self.store, self.executor, self.workers, self.progress = setup, store, executor, workers, progress
+        self.pb = problem(setup)
+        self.params = self.pb.params
+        n = len(self.pb.params.varying)
+        self.n_design = int(budget.get("design", 10 * n + 10))
+        self.restarts = int(budget.get("restarts", 3))
+        self.per_stage = int(budget.get("simulations", 40 * (n + 1)))  # a cap per stage; stages stop on progress
+        self.candidates = int(budget.get("candidates", max(2 * self.restarts, n + 2)))
+        if self.n_design < 1 or self.restarts < 1 or self.per_stage < n + 2:
+            raise _bad(f"config key 'budget': need design >= 1, restarts >= 1, simulations >= {n + 2}")
+        self.seed = int(seed)
+        self.verdict_options = {"step_within_sigma": True}  # a long record's time residual is a needle at the
+        # scale of the noise's 1-sigma: a Gauss-Newton step within it is no evidence of a better minimum
+        self.design_res: list[dict[str, Any]] = []
+        self.screened: list[dict[str, Any]] = []
+        self.ranked: list[int] = []
+        self.ends: list[dict[str, Any]] = []
+        self.polish_stats = {"simulations": 0, "failures": 0, "samples": 0}
+
+    def _run(self, tasks: list[Any]) -> list[dict[str, Any]]:
+        from .executor import run_tasks
+
+        return run_tasks(tasks, executor=self.executor, store=self.store, progress=self.progress,
+                         workers=self.workers)
+
+    def _design_and_screen(self) -> None:
+        from scipy.stats import qmc
+
+        from .executor import Task
+
+        n = len(self.pb.params.varying)
+        design = qmc.LatinHypercube(d=n, seed=self.seed).random(self.n_design)
+        nw = self.workers or os.cpu_count() or 1
+        chunks = [c for c in np.array_split(np.arange(self.n_design), min(nw, self.n_design)) if c.size]
+        self.design_res = self._run([Task(f"design-{k:03d}", design_task,
+                                          {"setup": self.setup, "points": design[c].tolist()},
+                                          label=f"design {k + 1}/{len(chunks)} ({c.size} runs)")
+                                     for k, c in enumerate(chunks)])
+        self.costs = np.concatenate([np.asarray(r["costs"], float) for r in self.design_res])
+        cand = np.argsort(self.costs, kind="stable")[:max(self.candidates, self.restarts)]
+        self.screened = self._run([Task(f"screen-{k + 1}", restart_task,
+                                        {"setup": self.setup, "x0": design[i].tolist(),
+                                         "simulations": self.per_stage, "part": "screen"},
+                                        label=f"screen {k + 1}/{len(cand)} from design point {i} "
+                                              f"(cost {self.costs[i]:.3g})")
+                                   for k, i in enumerate(cand)])
+        self.ranked = sorted(range(len(self.screened)), key=lambda k: self.screened[k]["cost"])
+
+    def start(self, k: int) -> Start | None:
+        if not self.screened:
+            self._design_and_screen()
+        if k >= len(self.ranked):
+            return None
+        j = self.ranked[k]
+        c0, sc = float(self.screened[self.ranked[0]]["cost"]), self.screened[j]
+        if k > 0 and float(sc["cost"]) > SCREEN_RATIO * c0:
+            return None  # a start in another basin: its screen ended well above the best one's
+        runs = {str(p["stage"]): int(p["runs"]) for p in sc.get("per_stage", [])}
+        return Start(np.asarray(sc["x"], float), float(sc["cost"]), runs, str(sc["message"]), {"screen": j + 1})
+
+    def descend(self, starts: Sequence[tuple[int, Start]]) -> list[End]:
+        from .executor import Task
+
+        res = self._run([Task(f"restart-{k + 1}", restart_task,
+                              {"setup": self.setup, "x0": s.x.tolist(), "simulations": self.per_stage, "part": "rest"},
+                              label=f"restart {k + 1} from screen {s.info['screen']} (cost {s.cost:.3g})")
+                         for k, s in starts])
+        out = []
+        for (_, s), e in zip(starts, res):
+            self.ends.append(e)
+            runs = dict(s.runs)
+            for p in e.get("per_stage", []):
+                runs[str(p["stage"])] = runs.get(str(p["stage"]), 0) + int(p["runs"])
+            msg = f"{s.message}; then {e['message']}"
+            out.append(End(np.asarray(e["x"], float), float(e["cost"]), runs, msg,
+                           {"failures": int(e["failures"]) + int(self.screened[s.info["screen"] - 1]["failures"]),
+                            "message": msg}))
+        return out
+
+    def residuals(self, U: np.ndarray) -> np.ndarray:
+        return self.pb.residuals(U)
+
+    def data(self) -> np.ndarray:
+        return self.pb.data()
+
+    def polish(self, x: np.ndarray) -> tuple[np.ndarray, float, int, str] | None:
+        before = self.pb.simulations
+        out = staged_least_squares(lambda z, st: self.pb.residual(z, st[0], st[1]), np.asarray(x, float),
+                                   stages_of(self.pb, "rest")[-1:], 2 * self.per_stage, lambda: self.pb.simulations,
+                                   lambda st: stage_label(*st), float(self.setup["diff_step"]))
+        return np.asarray(out["x"], float), float(out["cost"]), self.pb.simulations - before, str(out["message"])
+
+
 def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None = None,
                      scheduler: str | None = None, workers: int | None = None, progress: bool = True,
                      base: str | Path = ".") -> dict[str, Any]:
@@ -333,70 +467,23 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
         ``wall_s``, the verdict (``converged``, ``uncertainty``, ``non_identifiable`` ...),
         ``restarts``, ``errors_percent`` when the target gives true ``values``.
     """
-    from scipy.stats import qmc
-
-    from .executor import Task, run_tasks
-    from .verdict import verdict
+    from .recipe import run_recipe
 
     t0 = time.perf_counter()
     setup = make_setup(cfg, base)
-    pb = problem(setup)
-    names = list(pb.params.varying)
-    n = len(names)
-    budget = dict(cfg.get("budget", {}))
-    n_design = int(budget.get("design", 10 * n + 10))
-    restarts = int(budget.get("restarts", 3))
-    per_restart = int(budget.get("simulations", 40 * (n + 1)))  # a cap per stage; stages stop on progress
-    candidates = int(budget.get("candidates", max(2 * restarts, n + 2)))
-    if n_design < 1 or restarts < 1 or per_restart < n + 2:
-        raise _bad(f"config key 'budget': need design >= 1, restarts >= 1, simulations >= {n + 2}")
-    seed = int(cfg.get("seed", 1))
     store = Path(out) if out is not None else _out_dir(cfg, setup)
-    executor = scheduler or "processes"
-    nw = workers or os.cpu_count() or 1
-    design = qmc.LatinHypercube(d=n, seed=seed).random(n_design)
-    chunks = [c for c in np.array_split(np.arange(n_design), min(nw, n_design)) if c.size]
-    tasks = [Task(f"design-{k:03d}", design_task, {"setup": setup, "points": design[c].tolist()},
-                  label=f"design {k + 1}/{len(chunks)} ({c.size} runs)") for k, c in enumerate(chunks)]
-    res = run_tasks(tasks, executor=executor, store=store, progress=progress, workers=workers)
-    costs = np.concatenate([np.asarray(r["costs"], float) for r in res])
-    sims = sum(int(r["simulations"]) for r in res)
-    fails = sum(int(r["failures"]) for r in res)
-    # screen: the short windows from the best ``candidates`` design points (cheap runs)
-    cand = np.argsort(costs, kind="stable")[:max(candidates, restarts)]
-    stasks = [Task(f"screen-{k + 1}", restart_task,
-                   {"setup": setup, "x0": design[i].tolist(), "simulations": per_restart, "part": "screen"},
-                   label=f"screen {k + 1}/{len(cand)} from design point {i} (cost {costs[i]:.3g})")
-              for k, i in enumerate(cand)]
-    screened = run_tasks(stasks, executor=executor, store=store, progress=progress, workers=workers)
-    sims += sum(int(r["simulations"]) for r in screened)
-    fails += sum(int(r["failures"]) for r in screened)
-    ranked = sorted(range(len(screened)), key=lambda k: screened[k]["cost"])
-    c0 = float(screened[ranked[0]]["cost"])
-    keep = [k for k in ranked[:restarts] if k == ranked[0] or screened[k]["cost"] <= SCREEN_RATIO * c0]
-    rtasks = [Task(f"restart-{j + 1}", restart_task,
-                   {"setup": setup, "x0": screened[k]["x"], "simulations": per_restart, "part": "rest"},
-                   label=f"restart {j + 1}/{len(keep)} from screen {k + 1} (cost {screened[k]['cost']:.3g})")
-              for j, k in enumerate(keep)]
-    ends = run_tasks(rtasks, executor=executor, store=store, progress=progress, workers=workers)
-    for j, k in enumerate(keep):
-        e = ends[j] = dict(ends[j])
-        e["per_stage"] = list(screened[k].get("per_stage", [])) + list(e.get("per_stage", []))
-        e["message"] = f"{screened[k]['message']}; then {e['message']}"
-        e["simulations"] = int(e["simulations"]) + int(screened[k]["simulations"])
-        e["failures"] = int(e["failures"]) + int(screened[k]["failures"])
-    sims += sum(int(r["simulations"]) for r in ends) - sum(int(screened[k]["simulations"]) for k in keep)
-    fails += sum(int(r["failures"]) for r in ends) - sum(int(screened[k]["failures"]) for k in keep)
-    best = min(range(len(ends)), key=lambda k: ends[k]["cost"])
-    xb = np.asarray(ends[best]["x"], float)
+    kind = FmuKind(setup, dict(cfg.get("budget", {})), int(cfg.get("seed", 1)), store, scheduler or "processes",
+                   workers, progress)
+    pb = kind.pb
+    names = list(pb.params.varying)
     pb.reset_stats()
-    rms = lambda x: float(np.sqrt(np.mean(pb.residual(np.asarray(x, float))[0] ** 2)))  # noqa: E731
-    end_points = [(np.asarray(e["x"], float), rms(e["x"])) for e in ends]
-    # a long record's time residual is a needle at the scale of the noise's 1-sigma: a Gauss-Newton step
-    # within it is no evidence of a better minimum
-    v = verdict(pb.residuals, pb.params, xb, pb.data(), end_points, step_within_sigma=True)
-    sims += pb.simulations
-    fails += pb.model.failures
+    # more restarts (screened candidates within SCREEN_RATIO of the best) while fewer than two reach the noise
+    outcome = run_recipe(kind, kind.restarts, kind.candidates, progress=progress, label="estimate (FMU)")
+    v, xb = outcome.verdict, outcome.x
+    screened, ends, res = kind.screened, kind.ends, kind.design_res
+    used = {r["screen"] - 1 for r in outcome.stages}
+    sims = (sum(int(r["simulations"]) for r in list(res) + list(screened) + list(ends)) + pb.simulations)
+    fails = (sum(int(r["failures"]) for r in list(res) + list(screened) + list(ends)) + pb.model.failures)
     samples = sum(int(r.get("samples", 0)) for r in list(res) + list(screened) + list(ends)) + pb.model.samples
     est = pb.values(xb)
     answer: dict[str, Any] = {
@@ -404,22 +491,29 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
         "input": setup["input"], "input_hold": _hold_text(setup, pb), "input_hold_reason": setup["hold_reason"],
         "values": dict(setup["values"]),
         "estimate": {k: est[k] for k in names}, "tied": {k: est[k] for k in setup["ties"]},
-        "cost": float(ends[best]["cost"]), "fmu_simulations": sims, "failed_evaluations": fails,
+        "cost": float(outcome.cost), "fmu_simulations": sims, "failed_evaluations": fails,
         "fmu_record_equivalents": samples / pb.n,
         "wall_s": time.perf_counter() - t0, "converged": v["converged"],
         "convergence_reason": v["convergence_reason"], "uncertainty": v["uncertainty"],
         "non_identifiable": v["non_identifiable"], "non_identifiable_reasons": v["non_identifiable_reasons"],
         "verdict": {k: v[k] for k in ("residual_rms", "noise_floor", "noise_sigma", "tolerance", "at_bound", "restarts",
                                       "condition")},
-        "design": {"points": n_design, "best_cost": float(costs.min()), "failed": int(np.sum(costs >= 1e3)),
-                   "scored_on": res[0].get("scored_on"), "runs": int(sum(int(r["simulations"]) for r in res))},
-        "screen": {"candidates": len(screened), "kept": len(keep),
+        "design": {"points": kind.n_design, "best_cost": float(kind.costs.min()),
+                   "failed": int(np.sum(kind.costs >= 1e3)), "scored_on": res[0].get("scored_on"),
+                   "runs": int(sum(int(r["simulations"]) for r in res))},
+        "screen": {"candidates": len(screened), "kept": len(used),
                    "runs": int(sum(int(r["simulations"]) for r in screened)),
                    "costs": [float(r["cost"]) for r in screened]},
-        "restarts": [{"restart": k + 1, "cost": e["cost"], "simulations": e["simulations"],
-                      "failures": e["failures"], "message": e["message"], "runs_per_stage": e.get("per_stage"),
+        "restarts": [{"restart": r["restart"], "cost": r["cost"],
+                      "simulations": int(r["evaluations"]) - 1, "failures": r["failures"],
+                      "message": r["message"],
+                      "runs_per_stage": [{"stage": k, "runs": n} for k, n in r["runs_per_stage"].items()],
                       "estimate": {kk: pb.values(np.asarray(e["x"]))[kk] for kk in names}}
-                     for k, e in enumerate(ends)],
+                     for r, e in zip(outcome.stages, ends)],
+        "runs_per_stage": {"design": int(sum(int(r["simulations"]) for r in res)),
+                           "screen": int(sum(int(r["simulations"]) for r in screened)),
+                           "continuation": int(sum(int(r["simulations"]) for r in ends)),
+                           "verdict and polish": int(pb.simulations)},
         "out": str(store),
     }
     truth = (cfg.get("target") or {}).get("values")
