@@ -38,7 +38,8 @@ window of one:
    positive bounds), ranked on the record's *responses*: the log-magnitude of
    the Welch H1 responses from the input (or recorded current) to every
    compared output over the whole record (:meth:`~estimation.fmu_problem.FmuProblem.response_target`,
-   Hann segments of an 8th of the record), a smooth function of the
+   Hann segments of an 8th of the record, over its first quarter: three
+   segments, each design point a run of a quarter of the record), a smooth function of the
    parameters where the time residual of a long record is a needle; then
    the *screen*: from the ``budget.candidates`` best design points (default
    ``max(2 restarts, n + 2)``), a trust-region least squares

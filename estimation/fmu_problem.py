@@ -27,8 +27,10 @@ fixed length, dimensionless; the reported cost is their RMS:
 ``response`` (ranks the design points)
     ``log10 |H / H_t|`` of the Welch H1 responses from the record's input (or
     recorded current) to every compared output, Hann segments of ``window``
-    samples, at the bins up to ``0.45 fs`` where the input has power and the
-    record's coherence is at least 0.9 (:meth:`FmuProblem.response_target`).
+    samples over the record's first ``2 window`` samples (the model run over
+    that span only: :meth:`FmuProblem.response_span`), at the bins up to
+    ``0.45 fs`` where the input has power and the record's coherence is at
+    least 0.9 (:meth:`FmuProblem.response_target`).
 
 A failed run (:class:`estimation.fmu_model.FmuModel` returns None) gives the
 residual vector ``PENALTY`` everywhere: a cost far above any fit's.
@@ -53,6 +55,8 @@ __all__ = ["FmuProblem", "problem", "read_record", "parameter_set", "APPROACHES"
 APPROACHES = ("time", "emd", "iemd", "frequency")
 #: Residual value of a failed run (the cost of a failed run is this, dimensionless).
 PENALTY = 1e3
+#: A response stage compares this many segment lengths of the record (three half-overlapping Hann segments).
+RESPONSE_SPAN_SEGMENTS = 2
 COHERENCE_MIN = 0.99
 
 
@@ -208,7 +212,8 @@ class FmuProblem:
 
         ws = WelchSettings(window="hann", overlap=0.5, nperseg=key)
         outs = [o for o in self.outputs if o != self.current]
-        f, H, coh, pxx = welch_h1(self.i_target, [self.targets[o] for o in outs], self.fs, ws)
+        span = self.response_span(key)
+        f, H, coh, pxx = welch_h1(self.i_target[:span], [self.targets[o][:span] for o in outs], self.fs, ws)
         keep = (f > 0) & (f <= 0.45 * self.fs) & (pxx >= 1e-4 * np.max(pxx))
         for h, c in zip(H, coh):
             keep &= (c >= 0.9) & np.isfinite(h) & (np.abs(h) > 0)
@@ -216,16 +221,32 @@ class FmuProblem:
             cache[key] = None
             return None
         bins = np.flatnonzero(keep)
-        cache[key] = {"settings": ws, "bins": bins, "f": f[bins], "outputs": outs,
+        cache[key] = {"settings": ws, "bins": bins, "f": f[bins], "outputs": outs, "span": span,
                       "log": [np.log10(np.abs(h[bins])) for h in H]}
         return cache[key]
+
+    def response_span(self, nper: int) -> int:
+        """Samples of the record (from its start) whose responses a response stage compares.
+
+        Three half-overlapping Hann segments (``2 nper`` samples), or the whole record when shorter. The
+        model's responses and the record's come from the same input over the same segments, so an exact
+        model matches them exactly (the transient and leakage of the segments are common to both); the
+        frequency resolution is the segments' and each design point costs a run of that span only.
+
+        Parameters
+        ----------
+        nper : int
+            Samples per Hann segment.
+        """
+        return int(min(self.n, RESPONSE_SPAN_SEGMENTS * nper))
 
     def _response_residual(self, y: np.ndarray, nper: int) -> np.ndarray:
         from .approaches import welch_h1
 
         tg = self.response_target(nper)
-        ref = self.i_target if self.input else y[len(self.outputs)]
-        ys = [y[self.outputs.index(o)] for o in tg["outputs"]]
+        span = tg["span"]
+        ref = self.i_target[:span] if self.input else y[len(self.outputs)][:span]
+        ys = [y[self.outputs.index(o)][:span] for o in tg["outputs"]]
         _, H, _, _ = welch_h1(ref, ys, self.fs, tg["settings"], tg["bins"])
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.concatenate([np.log10(np.abs(h)) - t for h, t in zip(H, tg["log"])])
@@ -305,7 +326,8 @@ class FmuProblem:
         which = which or self.approach
         if which == "response":
             nper = int(window or self.n // 2)
-            y = self.simulate(x)
+            tg = self.response_target(nper)
+            y = self.simulate(x, tg["span"] if tg is not None else None)
             if y is None:
                 return np.full(self.size(which, nper), PENALTY), PENALTY
             r = self._response_residual(y, nper)
