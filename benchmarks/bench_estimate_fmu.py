@@ -17,7 +17,8 @@ creates a throwaway virtual environment outside the repository (default: a new t
 ``pip install``s estim8 there (``--peer-package``) and, after our estimate of each record, runs
 ``benchmarks/peers/estim8_driver.py`` with that environment's Python: estim8's differential evolution
 polished by L-BFGS-B on the same FMU, record, free values and bounds, one process, capped at
-``--peer-wall`` seconds (default 900). Printed and written to ``bench_estimate_fmu_peers.json``:
+``--peer-wall`` seconds (default 900); ``--peer-reuse`` takes the peer's answers stored in ``--out``
+by an earlier run instead of running it again (ours always runs). Printed and written to ``bench_estimate_fmu_peers.json``:
 per-parameter errors, FMU runs (ours also in whole-record equivalents), wall times, ours beside theirs,
 the ratio of runs and whether ours is within 2 % where theirs is not with at most a tenth of their runs.
 
@@ -189,12 +190,19 @@ def peer_python(a: argparse.Namespace) -> Path:
     return py
 
 
-def peer_estimate(a: argparse.Namespace, py: Path, d: Path, rec: str, out: Path) -> dict:
+def peer_estimate(a: argparse.Namespace, py: Path | None, d: Path, rec: str, out: Path) -> dict:
     """Run the peer (estim8, differential evolution polished by L-BFGS-B) on one ladder record."""
     import os
     import subprocess
 
     res_path, prog = out / f"peer-{Path(rec).stem}.json", out / f"peer-{Path(rec).stem}-progress.json"
+    if a.peer_reuse and res_path.exists():
+        doc = json.loads(res_path.read_text())
+        print(f"   peer {doc.get('peer', 'estim8')}: reused {res_path} (run {doc.get('date', 'earlier')}): worst error "
+              f"{doc['worst_percent']:.3g} %, {doc['runs']} FMU runs, {doc.get('wall_s', float('nan')):.1f} s "
+              f"({doc['stopped']})", flush=True)
+        return doc
+    py = py or peer_python(a)
     for f in (res_path, prog):
         f.unlink(missing_ok=True)
     cmd = [str(py), str(PEER_DRIVER), "--fmu", str(d / "ThreeSectionLadder.fmu"), "--record", str(d / rec),
@@ -217,6 +225,8 @@ def peer_estimate(a: argparse.Namespace, py: Path, d: Path, rec: str, out: Path)
         doc = json.loads(res_path.read_text())
     doc["process_wall_s"] = wall
     doc["worst_percent"] = max((abs(e) for e in doc["errors_percent"].values()), default=float("nan"))
+    doc["date"] = time.strftime("%Y-%m-%d %H:%M")
+    res_path.write_text(json.dumps(doc, indent=1))  # kept for --peer-reuse
     print(f"   peer {doc.get('peer', 'estim8')}: worst error {doc['worst_percent']:.3g} %, {doc['runs']} FMU runs, "
           f"{doc.get('wall_s', wall):.1f} s ({doc['stopped']}); truth cost {doc.get('truth_cost', float('nan')):.3g}, "
           f"end cost {doc.get('cost', float('nan')):.3g}", flush=True)
@@ -229,7 +239,7 @@ def ladder_peers(a: argparse.Namespace, d: Path, truth: dict[str, float], out: P
 
     from benchmarks.results_io import table, write_results
 
-    py = peer_python(a)
+    py = None if a.peer_reuse else peer_python(a)
     rows, err_rows, summary, loads = [], [], {}, []
     for rec in a.records.split(","):
         print(f"== {d.name}/{rec}: pris-cosim estimate", flush=True)
@@ -333,6 +343,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="with --ladder: also run estim8 on the same FMU and records (throwaway environment)")
     p.add_argument("--peer-venv", metavar="PATH", help="the peer's virtual environment (default: a new temp dir)")
     p.add_argument("--peer-package", default="estim8", help="what pip installs there (default estim8)")
+    p.add_argument("--peer-reuse", action="store_true",
+                   help="reuse the peer's stored answers in --out (from an earlier --peers run) instead of running it")
     p.add_argument("--peer-wall", type=float, default=900.0, help="wall-time cap of each peer estimate, s")
     p.add_argument("--peer-maxiter", type=int, default=100, help="the peer's differential-evolution generations")
     p.add_argument("--peer-popsize", type=int, default=15, help="the peer's population factor (scipy's popsize)")
