@@ -198,6 +198,8 @@ def peer_estimate(a: argparse.Namespace, py: Path | None, d: Path, rec: str, out
     res_path, prog = out / f"peer-{Path(rec).stem}.json", out / f"peer-{Path(rec).stem}-progress.json"
     if a.peer_reuse and res_path.exists():
         doc = json.loads(res_path.read_text())
+        doc.setdefault("worst_percent", max((abs(e) for e in doc["errors_percent"].values()), default=float("nan")))
+        doc.setdefault("process_wall_s", doc.get("wall_s", float("nan")))
         print(f"   peer {doc.get('peer', 'estim8')}: reused {res_path} (run {doc.get('date', 'earlier')}): worst error "
               f"{doc['worst_percent']:.3g} %, {doc['runs']} FMU runs, {doc.get('wall_s', float('nan')):.1f} s "
               f"({doc['stopped']})", flush=True)
