@@ -23,11 +23,10 @@ import numpy as np
 from .optimisers import Budget, OptimResult, minimize
 
 __all__ = ["Recorder", "optimise", "least_squares_polish", "batched_least_squares", "PolishResult",
-           "staged_least_squares", "stall_fraction", "profile_scan", "sloppy_parameters", "sloppiest_parameter", "STALL_FRACTION", "STALL_SPAN"]
+           "staged_least_squares", "profile_scan", "sloppy_parameters", "sloppiest_parameter", "STALL_FRACTION", "STALL_SPAN"]
 
-#: A stage stops when its best sum of squares fell by less than this fraction over its last ``STALL_SPAN (n + 1)``
-#: evaluations (:func:`stall_fraction`; an RMS cost falling by 1e-4).
-STALL_FRACTION = 2e-4
+#: A stage stops when its best cost fell by less than this fraction over its last ``STALL_SPAN (n + 1)`` evaluations.
+STALL_FRACTION = 1e-4
 STALL_SPAN = 4
 
 
@@ -295,16 +294,6 @@ class _Stalled(Exception):
     pass
 
 
-def stall_fraction(residuals: int) -> float:
-    """Relative fall of a sum of squares of ``residuals`` values below which a stage has stopped progressing.
-
-    :data:`STALL_FRACTION`, or ``1 / N`` for ``N`` residuals when that is larger: at the noise floor the sum of
-    squares is ``N`` noise variances, and a fall of a ``1 / N`` fraction is one unit of chi-square, the least a
-    fit can tell from the noise.
-    """
-    return max(STALL_FRACTION, 1.0 / residuals) if residuals > 0 else STALL_FRACTION
-
-
 def staged_least_squares(residual: Callable[[np.ndarray, Any], tuple[np.ndarray, float]], x0: np.ndarray,
                          stages: Sequence[Any], cap: int, counter: Callable[[], int],
                          label: Callable[[Any], str] = str, diff_step: float = 1e-5, finish: bool = True
@@ -312,9 +301,8 @@ def staged_least_squares(residual: Callable[[np.ndarray, Any], tuple[np.ndarray,
     """Trust-region least squares in the unit cube, one per stage, each starting where the last ended.
 
     Every stage but the last (every stage when ``finish`` is false) also stops when its best cost fell by
-    less than :func:`stall_fraction` of its sum of squares (:data:`STALL_FRACTION`, or one unit of
-    chi-square at the noise floor) over its last ``STALL_SPAN (n + 1)`` evaluations; the last runs to the minimum (or the cap): near the
-    noise its cost hardly falls while the values still move.
+    less than :data:`STALL_FRACTION` over its last ``STALL_SPAN (n + 1)`` evaluations; the last runs to the
+    minimum (or the cap): near the noise its cost hardly falls while the values still move.
 
     Parameters
     ----------
@@ -352,20 +340,17 @@ def staged_least_squares(residual: Callable[[np.ndarray, Any], tuple[np.ndarray,
         start = counter()
         best = {"x": [float(v) for v in x], "cost": math.inf}
         trace: list[float] = []
-        size = [0]
 
         def fun(z: np.ndarray, stage: Any = stage, start: int = start, stalls: bool = stalls) -> np.ndarray:
             if counter() - start >= cap:
                 raise _Spent
             if (stalls and len(trace) > span
-                    and trace[-1] > trace[-1 - span] * (1.0 - stall_fraction(size[0]))):
+                    and trace[-1] > trace[-1 - span] * (1.0 - STALL_FRACTION)):
                 raise _Stalled
             r, c = residual(z, stage)
-            size[0] = np.size(r)
             if c < best["cost"]:
                 best["x"], best["cost"] = [float(v) for v in z], float(c)
-                best["ss"] = float(np.sum(np.square(r)))
-            trace.append(best.get("ss", math.inf))
+            trace.append(best["cost"])
             return r
 
         text = label(stage)
@@ -376,8 +361,7 @@ def staged_least_squares(residual: Callable[[np.ndarray, Any], tuple[np.ndarray,
         except _Spent:
             messages.append(f"{text}: stopped at the cap of {cap} runs")
         except _Stalled:
-            messages.append(f"{text}: stopped on progress (sum of squares fell < "
-                            f"{stall_fraction(size[0]):.3g} over {span} runs)")
+            messages.append(f"{text}: stopped on progress (cost fell < {STALL_FRACTION:g} over {span} runs)")
         if not math.isfinite(best["cost"]):
             best["cost"] = float(residual(np.asarray(best["x"]), stage)[1])
         x = np.asarray(best["x"], float)
