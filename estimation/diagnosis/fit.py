@@ -327,12 +327,13 @@ class FrequencyFit:
         V = self.values_of(Xc)
         over = {n: V[:, i] for i, n in enumerate(self.free)}
         values = self.circuit.resolve(over, check=False)
-        T = [m.transfer(values, self.s) for m in self.models]
+        single = Xc.shape[0] == 1
+        T = [m.transfer(values, self.s, keep=single) for m in self.models]
         if self.couplings:  # a coupling step that makes the inductance matrix indefinite: no response
             bad = ~(np.atleast_1d(self.circuit.smallest_inductance_eigenvalue(values)) > 0)
             if np.any(bad):
                 T = [np.where(bad.reshape((-1,) + (1,) * (t.ndim - 1)), np.nan, t) for t in T]
-        if Xc.shape[0] == 1:
+        if single:
             self._cache = (key, T, values)
         return T, values
 
@@ -512,7 +513,7 @@ class FrequencyFit:
         pred: dict[str, np.ndarray] = {}
         dpred: dict[str, np.ndarray] = {}
         for m in self.models:
-            z, dv = m.response_derivatives(values, slopes, self.s, dz, ddz)
+            z, dv = m.response_derivatives(values, slopes, self.s, dz, ddz, kept=True)
             a, b = m.responses_tangent(z, dv, port_map if port_effects else None)
             pred.update(a)
             dpred.update(b)

@@ -49,6 +49,8 @@ from pris_cosim.mna import MNA
 
 #: Eigenvector condition number above which the resolvent is solved directly instead.
 MAX_CONDITION = 1e10
+#: Eigenvector condition number up to which the derivatives use the kept eigen-decomposition.
+KEPT_CONDITION = 1e6
 
 
 def capacitive_nodes(circuit: Circuit) -> set[str]:
@@ -124,17 +126,22 @@ class ProbedConfiguration:
                 if n != GROUND and n not in nodes:
                     nodes.append(n)
         self.nodes = nodes
-        self.mna = MNA(self.circuit, current_inputs=[self.port], voltage_inputs=self.sources)
+        # a current input at every response node (the port first): the derivatives need each output's row
+        # of the inverse, which reciprocity gives as the response to a current injected there
+        self.mna = MNA(self.circuit, current_inputs=nodes, voltage_inputs=self.sources)
         self._rows = [self.mna.outputs.index(f"v({n})") for n in nodes] + \
                      [self.mna.outputs.index(f"i({v})") for v in self.sources]
+        self._cols = [0] + list(range(len(nodes), len(nodes) + len(self.sources)))
         self._nodal: dict | None = None
+        #: Eigen-decomposition of the last single parameter set (:meth:`transfer` with ``keep``).
+        self._kept: dict | None = None
 
     @property
     def k(self) -> int:
         """Number of changeable branches."""
         return len(self.branches)
 
-    def transfer(self, values: Mapping[str, np.ndarray | float], s: np.ndarray) -> np.ndarray:
+    def transfer(self, values: Mapping[str, np.ndarray | float], s: np.ndarray, keep: bool = False) -> np.ndarray:
         """``T(s)`` for every parameter set: shape ``(P, nodes + k, 1 + k, F)``.
 
         Parameters
@@ -143,15 +150,21 @@ class ProbedConfiguration:
             Resolved element values of the (unprobed) circuit, scalars or length-P arrays.
         s : numpy.ndarray
             ``j 2 pi f``, rad/s.
+        keep : bool
+            Keep the eigen-decomposition of a single parameter set for
+            :meth:`response_derivatives` at the same values.
         """
         vals = dict(values)
         for v in self.sources:
             vals[v.lower()] = 0.0
         ss = self.mna.state_space(vals)
         C = ss.C[:, self._rows]
-        D = ss.D[:, self._rows]
+        D = ss.D[:, self._rows][:, :, self._cols]
+        B = ss.B[:, :, self._cols]
         P, n = ss.A.shape[0], ss.A.shape[1]
         no, ni = C.shape[1], D.shape[2]
+        if keep:
+            self._kept = None
         if n == 0:
             return np.broadcast_to(D[..., None], (P, no, ni, s.size)).astype(complex)
         lam, V = np.linalg.eig(ss.A)
@@ -162,16 +175,19 @@ class ProbedConfiguration:
         except np.linalg.LinAlgError:
             cond = np.full(P, np.inf)
             Vinv = np.zeros_like(V)
+        if keep and P == 1:
+            self._kept = {"lam": lam[0], "V": V[0], "Vinv": Vinv[0], "B": ss.B[0], "C": ss.C[0], "D": ss.D[0],
+                          "cond": float(cond[0])}
         good = np.flatnonzero(cond < MAX_CONDITION)
         if good.size:
-            W = Vinv[good] @ ss.B[good]  # (g, n, ni)
+            W = Vinv[good] @ B[good]  # (g, n, ni)
             CV = C[good] @ V[good]  # (g, no, n)
             R = np.einsum("pon,pni->poin", CV, W).reshape(good.size, no * ni, n)
             inv = 1.0 / (s[None, None, :] - lam[good][:, :, None])  # (g, n, F)
             out[good] = (R @ inv).reshape(good.size, no, ni, s.size) + D[good][..., None]
         for p in np.flatnonzero(~(cond < MAX_CONDITION)):  # (nearly) defective: solve the resolvent
             eye = np.eye(n)
-            X = np.linalg.solve(s[:, None, None] * eye - ss.A[p][None], np.broadcast_to(ss.B[p], (s.size, n, ni)))
+            X = np.linalg.solve(s[:, None, None] * eye - ss.A[p][None], np.broadcast_to(B[p], (s.size, n, ni)))
             out[p] = np.moveaxis(C[p][None] @ X + D[p][None], 0, -1)
         return out
 
@@ -287,9 +303,46 @@ class ProbedConfiguration:
         b[st["nodes"], np.arange(st["nodes"].size)] = 1.0
         return np.linalg.solve(K, np.broadcast_to(b, (s.size, n, b.shape[1])))
 
+    def kept_solution(self, s: np.ndarray, dz: np.ndarray | None = None) -> np.ndarray | None:
+        """:meth:`nodal_solution` from the eigen-decomposition kept by :meth:`transfer` (None when none is kept or
+        its eigenvectors are not well conditioned).
+
+        The state-space outputs give the node voltages and source currents,
+        the states the inductor currents; the branch changes close the probe
+        sources as in :meth:`responses_from`.
+        """
+        kept = self._kept
+        if kept is None or not kept["cond"] < KEPT_CONDITION:
+            return None
+        st = self._nodal_structure()
+        N, m, q = st["N"], st["m"], st["q"]
+        n = kept["lam"].size
+        r = n - m
+        full = np.zeros((N + m + q, n))  # unknowns of the nodal system from the states
+        full[:N] = kept["C"][:N]
+        full[N + m:] = kept["C"][N:]
+        full[N:N + m, r:] = np.eye(m)
+        direct = np.zeros((N + m + q, kept["D"].shape[1]))
+        direct[:N] = kept["D"][:N]
+        direct[N + m:] = kept["D"][N:]
+        CV = full @ kept["V"]  # (n_full, n)
+        W = kept["Vinv"] @ kept["B"]  # (n, inputs)
+        g = 1.0 / (s[None, :] - kept["lam"][:, None])  # (n, F)
+        nf, ni = CV.shape[0], W.shape[1]
+        T = ((CV[:, None, :] * W.T[None, :, :]).reshape(nf * ni, n) @ g).reshape(nf, ni, s.size)
+        T = np.moveaxis(T + direct[..., None], 2, 0)  # (F, n_full, inputs)
+        nq = len(self.nodes)
+        X = T[:, :, :nq]
+        if dz is not None and self.k:
+            p = st["probes"]
+            M = np.eye(self.k) - T[:, p, nq:] @ dz[0]
+            y = dz[0] @ np.linalg.solve(M, T[:, p, :nq])  # probe voltages (F, k, nodes)
+            X = X + T[:, :, nq:] @ y
+        return X
+
     def response_derivatives(self, values: Mapping[str, np.ndarray | float], slopes: Mapping[str, np.ndarray],
-                             s: np.ndarray, dz: np.ndarray | None = None, ddz: np.ndarray | None = None
-                             ) -> tuple[np.ndarray, np.ndarray]:
+                             s: np.ndarray, dz: np.ndarray | None = None, ddz: np.ndarray | None = None,
+                             kept: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Response node voltages per unit port current, ``(1, nodes, F)``, and their derivatives ``(J, nodes, F)``.
 
         ``dv/dp = -U (dK/dp) X`` on the closed nodal system
@@ -310,11 +363,17 @@ class ProbedConfiguration:
             ``j 2 pi f``, rad/s.
         dz, ddz : numpy.ndarray, optional
             Branch changes ``(1, F, k, k)``, Ohm, and their derivatives ``(J, F, k, k)``.
+        kept : bool
+            ``values`` are those of the last :meth:`transfer` with ``keep``: its
+            eigen-decomposition gives the nodal solution (:meth:`kept_solution`)
+            instead of a solve per frequency.
         """
         st = self._nodal_structure()
         N, m = st["N"], st["m"]
         J = len(next(iter(slopes.values()))) if slopes else (0 if ddz is None else ddz.shape[0])
-        Y = self.nodal_solution(values, s, dz)  # (F, n, no)
+        Y = self.kept_solution(s, dz) if kept else None
+        if Y is None:
+            Y = self.nodal_solution(values, s, dz)  # (F, n, no)
         X = Y[:, :, 0]  # the port current's solution (F, n)
         U = np.swapaxes(Y * st["sign"][None, :, None], 1, 2)  # output rows of K^-1 (F, no, n)
         F, no = s.size, U.shape[1]
