@@ -49,8 +49,8 @@ from pris_cosim.mna import MNA
 
 #: Eigenvector condition number above which the resolvent is solved directly instead.
 MAX_CONDITION = 1e10
-#: Eigenvector condition number up to which the derivatives use the kept eigen-decomposition.
-KEPT_CONDITION = 1e6
+#: Eigenvector condition number up to which the derivatives use the kept eigen-decomposition (as the responses).
+KEPT_CONDITION = MAX_CONDITION
 
 
 def capacitive_nodes(circuit: Circuit) -> set[str]:
