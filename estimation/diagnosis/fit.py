@@ -223,11 +223,14 @@ class FrequencyFit:
         self.index = {b.lower(): i for i, b in enumerate(self.branches)}
         self.models: list[ProbedConfiguration] = []
         produced: list[str] = []
+        drives: dict[tuple, list] = {}  # configurations driven alike (an impedance and a voltage ratio) share a model
         for cfg in self.configurations:
             wanted = [r for r in cfg.responses if r.name in self.measured]
             produced += [r.name for r in cfg.responses]
             if wanted:
-                self.models.append(ProbedConfiguration(self.circuit, cfg.port, cfg.shorts, wanted, self.branches))
+                drives.setdefault((cfg.port, tuple(sorted(cfg.shorts))), []).extend(wanted)
+        for (port, shorts), wanted in drives.items():
+            self.models.append(ProbedConfiguration(self.circuit, port, shorts, wanted, self.branches))
         unknown = [n for n in self.measured if n not in produced]
         if unknown:
             raise DiagnosisError(
