@@ -126,6 +126,14 @@ class ProbedConfiguration:
                 if n != GROUND and n not in nodes:
                     nodes.append(n)
         self.nodes = nodes
+
+        def where(n: str | None) -> int | None:
+            n = None if n is None else c.require_node(n)
+            return None if n in (None, GROUND) else nodes.index(n)
+
+        #: Per response: its name and the indices (in ``nodes``) of its two nodes (None for ground).
+        self._terms = [(r.name, where(r.node), where(r.minus)) for r in self.responses]
+        self._impedances = {r.name for r in self.responses if r.node is None}
         # a current input at every response node (the port first): the derivatives need each output's row
         # of the inverse, which reciprocity gives as the response to a current injected there
         self.mna = MNA(self.circuit, current_inputs=nodes, voltage_inputs=self.sources)
@@ -211,7 +219,6 @@ class ProbedConfiguration:
             x = np.linalg.solve(M, rhs)
             y = (dz @ x)[..., 0]  # (P, F, k)
             z = np.moveaxis(Tvp + np.einsum("pfqk,pfk->pfq", np.broadcast_to(Tvv, y.shape[:2] + Tvv.shape[2:]), y), 1, 2)
-        pos = {n: i for i, n in enumerate(self.nodes)}
         out = {}
         zin = z[:, 0]
         ratio_scale = 1.0
@@ -219,14 +226,12 @@ class ProbedConfiguration:
             if port_map is not None:
                 zin = port_map(zin)
                 ratio_scale = z[:, 0] / zin
-            for r in self.responses:
-                if r.node is None:
-                    out[r.name] = zin
+            for name, plus, minus in self._terms:
+                if name in self._impedances:
+                    out[name] = zin
                 else:
-                    def volt(n):
-                        n = None if n is None else self.circuit.require_node(n)
-                        return 0.0 if n in (None, GROUND) else z[:, pos[n]]
-                    out[r.name] = (volt(r.node) - volt(r.minus)) / z[:, 0] * ratio_scale
+                    v = (0.0 if plus is None else z[:, plus]) - (0.0 if minus is None else z[:, minus])
+                    out[name] = v / z[:, 0] * ratio_scale
         return out
 
     # ------------------------------------------------------------------ derivatives
@@ -446,19 +451,17 @@ class ProbedConfiguration:
         if port_map is not None:
             zin, slope = port_map(z0)
             dzin = slope * dz0
-        pos = {n: i for i, n in enumerate(self.nodes)}
         out, dout = {}, {}
         with np.errstate(divide="ignore", invalid="ignore"):
-            for r in self.responses:
-                if r.node is None:
-                    out[r.name], dout[r.name] = zin, dzin
+            for name, plus, minus in self._terms:
+                if name in self._impedances:
+                    out[name], dout[name] = zin, dzin
                     continue
                 num, dnum = 0.0, 0.0
-                for n, sign in ((r.node, 1.0), (r.minus, -1.0)):
-                    n = None if n is None else self.circuit.require_node(n)
-                    if n not in (None, GROUND):
-                        num = num + sign * z[:, pos[n]]
-                        dnum = dnum + sign * dv[:, pos[n]]
+                for i, sign in ((plus, 1.0), (minus, -1.0)):
+                    if i is not None:
+                        num = num + sign * z[:, i]
+                        dnum = dnum + sign * dv[:, i]
                 ratio = num / zin  # with a port map, (v - v_minus) / z * z / zin
-                out[r.name], dout[r.name] = ratio, (dnum - ratio * dzin) / zin
+                out[name], dout[name] = ratio, (dnum - ratio * dzin) / zin
         return out, dout
