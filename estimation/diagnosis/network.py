@@ -25,14 +25,18 @@ one ``k x k`` solve per frequency. Changing only ``dZ`` (the extension's own
 parameters) reuses the pole-residue form, so those Jacobian columns cost no
 new eigen-decomposition.
 
-Derivatives with respect to the circuit values come from the full nodal
-system ``K(s) u = b`` (node voltages, inductor and source currents):
-``dT/dp = -U (dK/dp) X`` with ``X = K^{-1} b`` and ``U = c K^{-1}`` (the
-outputs' rows of the inverse), one factorisation per frequency for every
-value. A resistor or capacitor between nodes ``a`` and ``b`` stamps
-``g (e_a - e_b)(e_a - e_b)^T``, so its term is an outer product of two
-differences; the inductances enter through the ``s L`` block
-(:meth:`ProbedConfiguration.transfer_derivatives`).
+Derivatives of the responses with respect to the circuit values come from
+the full nodal system closed by the branch changes, ``K(s) u = b`` (node
+voltages, inductor and source currents; a probe source's row reads
+``v_+ - v_- - dZ i = 0``): ``dv/dp = -U (dK/dp) X`` with ``X = K^{-1} b`` and
+``U`` the output rows of ``K^{-1}``, the same for every value. A resistor
+or capacitor between nodes ``a`` and ``b`` stamps ``g (e_a - e_b)(e_a - e_b)^T``,
+so its term is a product of two differences; the inductances enter through
+the ``s L`` block, a branch change through ``-dZ``. The network is
+reciprocal, so ``U`` is ``X`` for currents injected at the response nodes,
+and ``X`` comes from the pole-residue form of the evaluation that gave the
+responses (the states include the inductor currents), without a solve per
+frequency (:meth:`ProbedConfiguration.response_derivatives`).
 """
 
 from __future__ import annotations
