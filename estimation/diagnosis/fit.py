@@ -489,7 +489,9 @@ class FrequencyFit:
         cols = np.asarray(columns, int)
         J = cols.size
         xr = np.atleast_2d(np.asarray(x, float))
-        values = self._transfer(xr[:, : self.nc])[1]
+        T, values = self._transfer(xr[:, : self.nc])
+        if any(np.isnan(t).all() for t in T):  # no response (an indefinite inductance matrix): constant residuals
+            return np.zeros((self.n_residuals, J))
         slopes = self.value_slopes(xr[0], cols)
         params = self.effect_params(xr)
         dz = ddz = None
