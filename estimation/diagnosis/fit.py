@@ -45,6 +45,10 @@ from .network import ProbedConfiguration
 from .prior import DesignPrior
 
 
+#: Jacobian columns of the circuit values analytic (:meth:`FrequencyFit.circuit_jacobian`); False: forward
+#: differences, as the effects' columns.
+ANALYTIC_JACOBIAN = True
+
 #: Smoothing widths (decades of frequency) of a continued fit (:meth:`FrequencyFit.fit_continued`).
 CONTINUATION = (0.1, 0.03, 0.01)
 
@@ -268,7 +272,7 @@ class FrequencyFit:
         self._param_keys = {p.key for p in self.circuit.parameters}
         self._branch_values = sorted({k for e in self.effects for k in e.value_names(self.circuit, self.groups)})
         #: Circuit columns of the Jacobian by the nodal derivatives (else forward differences).
-        self.analytic_jacobian = True
+        self.analytic_jacobian = ANALYTIC_JACOBIAN
         self.prior = prior
         self._kernel: np.ndarray | None = None
         self._pidx = np.zeros(0, int)
