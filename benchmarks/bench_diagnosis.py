@@ -53,6 +53,8 @@ def run_case(kind: str, causes: list[str], seed: int, noise: float = 0.003, grou
     """Generate one hidden-effect case and diagnose it (top-level so worker processes can run it)."""
     import hidden_cases as hc
 
+    _jacobian_from_environment()
+
     from estimation.diagnosis import diagnose_frequency
     from pris_cosim.models import get_model
     from pris_cosim.netlist import parse_netlist
@@ -96,6 +98,14 @@ DESIGN_FAMILY = [((), False), ((), True), (("skin-effect",), False), (("core-los
                  (("magnetising-inductance",), False), (("skin-effect", "core-loss"), False),
                  (("skin-effect", "magnetising-inductance"), False), (("skin-effect",), True),
                  (("missing-section",), False), (("missing-section", "skin-effect"), False)]
+
+
+def _jacobian_from_environment() -> None:
+    """Analytic Jacobian columns in the fits when ``--analytic-jacobian`` set ``BENCH_ANALYTIC_JACOBIAN``."""
+    if os.environ.get("BENCH_ANALYTIC_JACOBIAN") == "1":
+        from estimation.diagnosis import fit
+
+        fit.ANALYTIC_JACOBIAN = True
 
 
 def design_cases(quick: bool) -> list[dict]:
@@ -163,6 +173,8 @@ def speed(progress: bool = True) -> dict:
     from pris_cosim.models import get_model
     from pris_cosim.netlist import parse_netlist
 
+    _jacobian_from_environment()
+
     def cpu() -> float:
         t = os.times()
         return t.user + t.system
@@ -215,7 +227,11 @@ def main() -> None:
     ap.add_argument("--no-speed", action="store_true", help="skip the timed single diagnoses")
     ap.add_argument("--only", nargs="+", default=None, metavar="TEXT",
                     help="run only the cases whose id contains one of these texts (e.g. missing-section none)")
+    ap.add_argument("--analytic-jacobian", action="store_true",
+                    help="analytic Jacobian columns of the circuit values (estimation.diagnosis.fit.ANALYTIC_JACOBIAN)")
     args = ap.parse_args()
+    if args.analytic_jacobian:
+        os.environ["BENCH_ANALYTIC_JACOBIAN"] = "1"  # read by the worker processes too
     todo = cases(args.quick)
     if args.only:
         todo = [c for c in todo if any(t in _task_id(c) for t in args.only)]
@@ -292,7 +308,8 @@ def main() -> None:
     s = None
     if not args.no_speed:
         s = speed()
-        print(f"\nspeed, one diagnosis at a time: one-port (5-section netlist, 200 points) {s['one_port_s']:.1f} s "
+        print(f"\nspeed ({'analytic' if args.analytic_jacobian else 'difference'} Jacobian columns of the circuit "
+              f"values), one diagnosis at a time: one-port (5-section netlist, 200 points) {s['one_port_s']:.1f} s "
               f"wall, {s['one_port_cpu_s']:.1f} s processor (goal 10 s wall); six responses (hv-4section, "
               f"200 points) {s['six_response_s']:.1f} s wall, {s['six_response_cpu_s']:.1f} s processor (goal 60 s); "
               f"load average {s['load_before']:.1f} before, {s['load_after']:.1f} after")
@@ -304,7 +321,8 @@ def main() -> None:
     tables = [table("Cases named right, per family (design-anchored: tolerance 0.2, truth within 10 % of the design)",
                     ["family", "named right", "cases", "%", "median wall (s)"], rows_out)]
     if s is not None:
-        tables.append(table(f"Speed, one diagnosis at a time (load average {s['load_before']:.1f} before, "
+        tables.append(table(f"Speed, one diagnosis at a time ({'analytic' if args.analytic_jacobian else 'difference'}"
+                            f" Jacobian columns; load average {s['load_before']:.1f} before, "
                             f"{s['load_after']:.1f} after)", ["diagnosis", "wall (s)", "processor (s)", "goal (s)"],
                             [["one-port, 5-section netlist, 200 points", round(s["one_port_s"], 1),
                               round(s["one_port_cpu_s"], 1), 10],

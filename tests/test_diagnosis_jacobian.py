@@ -68,6 +68,7 @@ def test_one_port_circuit_columns_match_central_differences(which):
     design = FrequencyFit(circuit, cfg, f, data)
     prior = DesignPrior({n.lower(): v for n, v in zip(design.free, design.start)}, 0.2, 1e-4)
     fit = FrequencyFit(circuit, cfg, f, data, effects=effects, scale=scale, prior=prior)
+    fit.analytic_jacobian = True
     assert any(e.kind == "K" for e in fit.circuit.elements)  # mutual inductances between the sections
     x = _moved(fit)
     J = fit.jacobian(x)
@@ -81,6 +82,7 @@ def test_one_port_circuit_columns_match_central_differences(which):
 def test_smoothed_errors_and_the_nodal_solve_give_the_same_columns():
     circuit, cfg, f, data = _one_port()
     fit = FrequencyFit(circuit, cfg, f, data, effects=[cat.SkinEffect(form="causal", f_ref=f[0])])
+    fit.analytic_jacobian = True
     x = _moved(fit, seed=2)
     fit.smooth(0.03)
     J = fit.jacobian(x)
@@ -98,6 +100,7 @@ def test_six_responses_with_a_parameter_couplings_and_voltage_ratios(couplings):
     effects = [cat.MagnetisingInductance(form="causal", f_ref=case.frequency_hz[0], group="hv")]
     fit = FrequencyFit(model.circuit, cfg, case.frequency_hz, case.measured, tuple(model.fixed), effects=effects,
                        scale=100.0, couplings=couplings)
+    fit.analytic_jacobian = True
     assert "Rb" in fit.free and {r for m in fit.models for r in m._impedances} < set(case.measured)
     x = _moved(fit, seed=3)
     J = fit.jacobian(x)[:, : fit.nc]
