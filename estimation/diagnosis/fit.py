@@ -20,10 +20,10 @@ Speed: responses come from the pole-residue form of the constant circuit
 with the effects closed around it (:mod:`.network`); a batch of parameter
 vectors shares one eigen-decomposition per distinct set of circuit values,
 so the Jacobian columns of the effects' own parameters (and a fit of those
-alone, :meth:`FrequencyFit.fit` with ``circuit_free=False``) need none. The
-Jacobian columns of the circuit values are analytic
-(:meth:`FrequencyFit.circuit_jacobian`): the adjoint of the closed nodal
-system, whose solution comes from the eigen-decomposition of the same
+alone, :meth:`FrequencyFit.fit` with ``circuit_free=False``) need none. With
+:data:`ANALYTIC_JACOBIAN` the Jacobian columns of the circuit values are
+analytic (:meth:`FrequencyFit.circuit_jacobian`): the adjoint of the closed
+nodal system, whose solution comes from the eigen-decomposition of the same
 evaluation, so a Jacobian costs no eigen-decomposition at all.
 """
 
