@@ -53,6 +53,8 @@ def run_case(kind: str, causes: list[str], seed: int, noise: float = 0.003, grou
     """Generate one hidden-effect case and diagnose it (top-level so worker processes can run it)."""
     import hidden_cases as hc
 
+    _jacobian_from_environment()
+
     from estimation.diagnosis import diagnose_frequency
     from pris_cosim.models import get_model
     from pris_cosim.netlist import parse_netlist
@@ -96,6 +98,14 @@ DESIGN_FAMILY = [((), False), ((), True), (("skin-effect",), False), (("core-los
                  (("magnetising-inductance",), False), (("skin-effect", "core-loss"), False),
                  (("skin-effect", "magnetising-inductance"), False), (("skin-effect",), True),
                  (("missing-section",), False), (("missing-section", "skin-effect"), False)]
+
+
+def _jacobian_from_environment() -> None:
+    """Analytic Jacobian columns in the fits when ``--analytic-jacobian`` set ``BENCH_ANALYTIC_JACOBIAN``."""
+    if os.environ.get("BENCH_ANALYTIC_JACOBIAN") == "1":
+        from estimation.diagnosis import fit
+
+        fit.ANALYTIC_JACOBIAN = True
 
 
 def design_cases(quick: bool) -> list[dict]:
@@ -163,17 +173,24 @@ def speed(progress: bool = True) -> dict:
     from pris_cosim.models import get_model
     from pris_cosim.netlist import parse_netlist
 
-    out = {}
+    _jacobian_from_environment()
+
+    def cpu() -> float:
+        t = os.times()
+        return t.user + t.system
+
+    out = {"load_before": os.getloadavg()[0]}
     one = hc.one_port_case(("skin-effect",), 7, sections=5)
-    t = time.perf_counter()
+    t, c = time.perf_counter(), cpu()
     diagnose_frequency(one.frequency_hz, one.measured, circuit=parse_netlist(one.baseline_netlist), port="n1",
                        progress=False)
-    out["one_port_s"] = time.perf_counter() - t
+    out["one_port_s"], out["one_port_cpu_s"] = time.perf_counter() - t, cpu() - c
     two = hc.two_winding_case(("skin-effect",), 7, group="hv", points=200)
     model = get_model("hv-4section")
-    t = time.perf_counter()
+    t, c = time.perf_counter(), cpu()
     diagnose_frequency(two.frequency_hz, two.measured, model=model, progress=False)
-    out["six_response_s"] = time.perf_counter() - t
+    out["six_response_s"], out["six_response_cpu_s"] = time.perf_counter() - t, cpu() - c
+    out["load_after"] = os.getloadavg()[0]
     # one candidate's responses for a Jacobian's worth of parameter sets: fast path against dense solves
     fit = FrequencyFit(model.circuit, list(model.configurations.values()), two.frequency_hz, two.measured,
                        effects=[SkinEffect(form="causal", f_ref=10.0)])
@@ -210,7 +227,11 @@ def main() -> None:
     ap.add_argument("--no-speed", action="store_true", help="skip the timed single diagnoses")
     ap.add_argument("--only", nargs="+", default=None, metavar="TEXT",
                     help="run only the cases whose id contains one of these texts (e.g. missing-section none)")
+    ap.add_argument("--analytic-jacobian", action="store_true",
+                    help="analytic Jacobian columns of the circuit values (estimation.diagnosis.fit.ANALYTIC_JACOBIAN)")
     args = ap.parse_args()
+    if args.analytic_jacobian:
+        os.environ["BENCH_ANALYTIC_JACOBIAN"] = "1"  # read by the worker processes too
     todo = cases(args.quick)
     if args.only:
         todo = [c for c in todo if any(t in _task_id(c) for t in args.only)]
@@ -287,8 +308,11 @@ def main() -> None:
     s = None
     if not args.no_speed:
         s = speed()
-        print(f"\nspeed, one diagnosis at a time: one-port (5-section netlist, 200 points) {s['one_port_s']:.1f} s "
-              f"(goal 10 s); six responses (hv-4section, 200 points) {s['six_response_s']:.1f} s (goal 60 s)")
+        print(f"\nspeed ({'analytic' if args.analytic_jacobian else 'difference'} Jacobian columns of the circuit "
+              f"values), one diagnosis at a time: one-port (5-section netlist, 200 points) {s['one_port_s']:.1f} s "
+              f"wall, {s['one_port_cpu_s']:.1f} s processor (goal 10 s wall); six responses (hv-4section, "
+              f"200 points) {s['six_response_s']:.1f} s wall, {s['six_response_cpu_s']:.1f} s processor (goal 60 s); "
+              f"load average {s['load_before']:.1f} before, {s['load_after']:.1f} after")
         print(f"one Jacobian's worth of responses ({len(model_rows())} responses): fast path {s['fast_batch_s'] * 1e3:.0f} ms, "
               f"dense per-frequency solve {s['dense_batch_s'] * 1e3:.0f} ms (ratio "
               f"{s['dense_batch_s'] / s['fast_batch_s']:.1f}x), agreement {s['fast_vs_dense_max_rel']:.1e}")
@@ -297,9 +321,13 @@ def main() -> None:
     tables = [table("Cases named right, per family (design-anchored: tolerance 0.2, truth within 10 % of the design)",
                     ["family", "named right", "cases", "%", "median wall (s)"], rows_out)]
     if s is not None:
-        tables.append(table("Speed, one diagnosis at a time", ["diagnosis", "wall (s)", "goal (s)"],
-                            [["one-port, 5-section netlist, 200 points", round(s["one_port_s"], 1), 10],
-                             ["six responses, hv-4section, 200 points", round(s["six_response_s"], 1), 60]]))
+        tables.append(table(f"Speed, one diagnosis at a time ({'analytic' if args.analytic_jacobian else 'difference'}"
+                            f" Jacobian columns; load average {s['load_before']:.1f} before, "
+                            f"{s['load_after']:.1f} after)", ["diagnosis", "wall (s)", "processor (s)", "goal (s)"],
+                            [["one-port, 5-section netlist, 200 points", round(s["one_port_s"], 1),
+                              round(s["one_port_cpu_s"], 1), 10],
+                             ["six responses, hv-4section, 200 points", round(s["six_response_s"], 1),
+                              round(s["six_response_cpu_s"], 1), 60]]))
     d_right = sum(named_right(r) for r in design)
     write_results("bench_diagnosis", tables=tables,
                   summary=f"design-anchored family {d_right}/{len(design)} named right, "

@@ -114,6 +114,14 @@ class MNA:
         self.BV = np.zeros((len(self.vsources), len(self.voltage_inputs)))
         for j, v in enumerate(self.voltage_inputs):
             self.BV[self.vsources.index(v), j] = 1.0
+        inductor_index = {e.key: i for i, e in enumerate(self.inductors)}
+        self._couplings = []
+        for k in circuit.of_kind("K"):
+            try:
+                self._couplings.append((k.key, *(inductor_index[n.lower()] for n in k.nodes)))
+            except KeyError:
+                bad = next(n for n in k.nodes if n.lower() not in inductor_index)
+                raise CircuitError(f"element {k.name!r}: {bad!r} is not an inductor of the circuit") from None
         self._bases()
         self.states = [f"v({s})" for s in self.dynamic_labels] + [f"i({e.name})" for e in self.inductors]
         self.inputs = [f"i_in({n})" for n in self.current_inputs] + [f"v({v.name})" for v in self.voltage_inputs]
@@ -166,18 +174,24 @@ class MNA:
         P = population_size(values)
         N = len(self.nodes)
 
-        def column(elements: Sequence, transform=None) -> np.ndarray:
-            if not elements:
-                return np.zeros((P, 0))
-            cols = [np.broadcast_to(_real_or_complex(values[e.key]), (P,)) for e in elements]
-            out = np.stack(cols, axis=1)
-            return transform(out) if transform else out
+        def column(elements: Sequence, real: bool = False) -> np.ndarray:
+            vals = [values[e.key] for e in elements]
+            cplx = not real and any(np.iscomplexobj(v) for v in vals)
+            out = np.empty((P, len(elements)), complex if cplx else float)
+            for j, v in enumerate(vals):
+                out[:, j] = np.real(v) if real else v
+            return out
 
-        G = (column(self.resistors, lambda r: 1.0 / r) @ self.Sg).reshape(P, N, N)
+        G = ((1.0 / column(self.resistors)) @ self.Sg).reshape(P, N, N)
         Cn = (column(self.capacitors) @ self.Sc).reshape(P, N, N)
-        magnetic = [e.key for e in self.inductors] + [k.key for k in self.circuit.of_kind("K")]
-        full = {k: np.broadcast_to(np.real(np.asarray(values[k])).astype(float), (P,)) for k in magnetic}
-        L = self.circuit.inductance_matrix(full).reshape(P, len(self.inductors), len(self.inductors))
+        m = len(self.inductors)
+        diag = column(self.inductors, real=True)
+        L = np.zeros((P, m, m))
+        L[:, np.arange(m), np.arange(m)] = diag
+        for key, i, j in self._couplings:  # M_ij = k_ij sqrt(L_i L_j), as Circuit.inductance_matrix
+            mutual = np.real(np.asarray(values[key])).astype(float) * np.sqrt(diag[:, i] * diag[:, j])
+            L[:, i, j] += mutual
+            L[:, j, i] += mutual
         return G, Cn, L
 
     def state_space(self, values: Mapping[str, Numeric]) -> StateSpace:
@@ -367,12 +381,6 @@ class MNA:
         rhs[N + m :, nI:] = self.BV
         x = np.linalg.solve(K, np.broadcast_to(rhs, (P, F) + rhs.shape))
         return x[:, :, list(outputs), :]
-
-
-def _real_or_complex(v: Numeric) -> np.ndarray:
-    """Element values as float arrays, or complex where a frequency-dependent impedance is complex."""
-    a = np.asarray(v)
-    return a.astype(complex if np.iscomplexobj(a) else float)
 
 
 def population_size(values: Mapping[str, Numeric]) -> int:

@@ -162,9 +162,25 @@ class Effect:
         """Impedance changes ``(names, dZ)`` with ``dZ`` of shape ``(P, F, m, m)``, Ohm."""
         return []
 
+    def value_names(self, circuit: Circuit, groups: Groups) -> set[str]:
+        """Lower-case names of the circuit values :meth:`branch_changes` reads: the branches and the couplings
+        between them (default)."""
+        names = {n.lower() for n in self.branches(circuit, groups)}
+        return names | {k.key for k in circuit.of_kind("K") if {n.lower() for n in k.nodes} <= names}
+
     def port_map(self, z: np.ndarray, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
         """Impedance seen at the instrument for port impedance ``z`` (P, F); default unchanged."""
         return z
+
+    def port_slope(self, z: np.ndarray, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Derivative of :meth:`port_map` with respect to the port impedance (``port_map`` is analytic in ``z``).
+
+        Default: a central difference in ``z``; effects with a port map give the closed form.
+        """
+        if type(self).port_map is Effect.port_map:
+            return np.ones_like(z)
+        h = 1e-6 * np.where(z != 0, z, 1.0)
+        return (self.port_map(z + h, f, p) - self.port_map(z - h, f, p)) / (2 * h)
 
     def applies(self, circuit: Circuit, groups: Groups) -> bool:
         return bool(self.branches(circuit, groups))
@@ -435,6 +451,9 @@ class StrayCapacitance(Effect):
     def port_map(self, z, f, p):
         return z / (1 + z * self.admittance(f, p))
 
+    def port_slope(self, z, f, p):
+        return 1 / (1 + z * self.admittance(f, p)) ** 2
+
     def formula(self, p):
         loss = (1 - p["alpha"]) * 90
         return (f"Y(f) = 2 pi f0 C (j f/f0)^alpha across the port, C = {p['c']:.4g} F, alpha = {p['alpha']:.4g} "
@@ -478,6 +497,9 @@ class LeadInductance(Effect):
 
     def port_map(self, z, f, p):
         return z + _p(p, "r") + 2j * np.pi * f[None, :] * _p(p, "l")
+
+    def port_slope(self, z, f, p):
+        return np.ones(np.broadcast_shapes(np.shape(z), (1, f.size)), complex)
 
     def formula(self, p):
         return f"Z_lead = R_l + j w L_l, R_l = {p['r']:.4g} Ohm, L_l = {p['l']:.4g} H"

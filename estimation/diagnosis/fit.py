@@ -20,7 +20,11 @@ Speed: responses come from the pole-residue form of the constant circuit
 with the effects closed around it (:mod:`.network`); a batch of parameter
 vectors shares one eigen-decomposition per distinct set of circuit values,
 so the Jacobian columns of the effects' own parameters (and a fit of those
-alone, :meth:`FrequencyFit.fit` with ``circuit_free=False``) need none.
+alone, :meth:`FrequencyFit.fit` with ``circuit_free=False``) need none. With
+:data:`ANALYTIC_JACOBIAN` the Jacobian columns of the circuit values are
+analytic (:meth:`FrequencyFit.circuit_jacobian`): the adjoint of the closed
+nodal system, whose solution comes from the eigen-decomposition of the same
+evaluation, so a Jacobian costs no eigen-decomposition at all.
 """
 
 from __future__ import annotations
@@ -40,6 +44,11 @@ from .catalogue import Effect, Groups, winding_groups
 from .network import ProbedConfiguration
 from .prior import DesignPrior
 
+
+#: Jacobian columns of the circuit values analytic (:meth:`FrequencyFit.circuit_jacobian`, about half the time of a
+#: diagnosis); False: forward differences of step 1e-6, as the effects' columns. Off by default: some diagnoses sit
+#: on the edge of the naming rules, where the rounding of the differences decides (docs/diagnosis-design.md).
+ANALYTIC_JACOBIAN = False
 
 #: Smoothing widths (decades of frequency) of a continued fit (:meth:`FrequencyFit.fit_continued`).
 CONTINUATION = (0.1, 0.03, 0.01)
@@ -223,11 +232,14 @@ class FrequencyFit:
         self.index = {b.lower(): i for i, b in enumerate(self.branches)}
         self.models: list[ProbedConfiguration] = []
         produced: list[str] = []
+        drives: dict[tuple, list] = {}  # configurations driven alike (an impedance and a voltage ratio) share a model
         for cfg in self.configurations:
             wanted = [r for r in cfg.responses if r.name in self.measured]
             produced += [r.name for r in cfg.responses]
             if wanted:
-                self.models.append(ProbedConfiguration(self.circuit, cfg.port, cfg.shorts, wanted, self.branches))
+                drives.setdefault((cfg.port, tuple(sorted(cfg.shorts))), []).extend(wanted)
+        for (port, shorts), wanted in drives.items():
+            self.models.append(ProbedConfiguration(self.circuit, port, shorts, wanted, self.branches))
         unknown = [n for n in self.measured if n not in produced]
         if unknown:
             raise DiagnosisError(
@@ -258,6 +270,10 @@ class FrequencyFit:
                 f"too few points: {self.f.size} frequencies for {self.nc + len(self.extra)} parameters"
             )
         self._cache: tuple[bytes, list[np.ndarray], dict] | None = None
+        self._param_keys = {p.key for p in self.circuit.parameters}
+        self._branch_values = sorted({k for e in self.effects for k in e.value_names(self.circuit, self.groups)})
+        #: Circuit columns of the Jacobian by the nodal derivatives (else forward differences).
+        self.analytic_jacobian = ANALYTIC_JACOBIAN
         self.prior = prior
         self._kernel: np.ndarray | None = None
         self._pidx = np.zeros(0, int)
@@ -323,12 +339,13 @@ class FrequencyFit:
         V = self.values_of(Xc)
         over = {n: V[:, i] for i, n in enumerate(self.free)}
         values = self.circuit.resolve(over, check=False)
-        T = [m.transfer(values, self.s) for m in self.models]
+        single = Xc.shape[0] == 1
+        T = [m.transfer(values, self.s, keep=single) for m in self.models]
         if self.couplings:  # a coupling step that makes the inductance matrix indefinite: no response
             bad = ~(np.atleast_1d(self.circuit.smallest_inductance_eigenvalue(values)) > 0)
             if np.any(bad):
                 T = [np.where(bad.reshape((-1,) + (1,) * (t.ndim - 1)), np.nan, t) for t in T]
-        if Xc.shape[0] == 1:
+        if single:
             self._cache = (key, T, values)
         return T, values
 
@@ -343,14 +360,7 @@ class FrequencyFit:
             T = [t[inv] for t in T]
             values = {k: (np.asarray(v)[inv] if np.ndim(v) else v) for k, v in values.items()}
         params = self.effect_params(X)
-        dz = None
-        if self.branches:
-            k = len(self.branches)
-            dz = np.zeros((P, F, k, k), complex)
-            for e, p in zip(self.effects, params):
-                for names, block in e.branch_changes(self.circuit, self.groups, values, self.f, p):
-                    idx = [self.index[n.lower()] for n in names]
-                    dz[:, :, np.array(idx)[:, None], np.array(idx)[None, :]] += block
+        dz = self._branch_dz(values, params, P) if self.branches else None
         port_effects = [(e, p) for e, p in zip(self.effects, params) if type(e).port_map is not Effect.port_map]
 
         def port_map(z):
@@ -362,6 +372,16 @@ class FrequencyFit:
         for m, t in zip(self.models, T):
             out.update(m.responses_from(t, dz, port_map if port_effects else None))
         return {k: np.broadcast_to(v, (P, F)) for k, v in out.items()}
+
+    def _branch_dz(self, values: Mapping[str, np.ndarray], params: list[dict[str, np.ndarray]], P: int) -> np.ndarray:
+        """The effects' branch impedance changes, shape ``(P, F, k, k)``, Ohm."""
+        k = len(self.branches)
+        dz = np.zeros((P, self.f.size, k, k), complex)
+        for e, p in zip(self.effects, params):
+            for names, block in e.branch_changes(self.circuit, self.groups, values, self.f, p):
+                idx = [self.index[n.lower()] for n in names]
+                dz[:, :, np.array(idx)[:, None], np.array(idx)[None, :]] += block
+        return dz
 
     def predict(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """Model responses for one parameter vector (log-ratio circuit values, then effect parameters)."""
@@ -390,15 +410,146 @@ class FrequencyFit:
         return self.residuals_batch(np.atleast_2d(x))[0]
 
     def jacobian(self, x: np.ndarray, step: float = 1e-6, columns: np.ndarray | None = None) -> np.ndarray:
-        """Forward-difference Jacobian, all perturbed vectors evaluated as one batch.
+        """Jacobian of :meth:`residuals`, shape ``(n_residuals, len(columns))``.
 
-        Columns of the effects' parameters share the unperturbed circuit's
+        Columns of the circuit values are analytic (:meth:`circuit_jacobian`)
+        unless ``analytic_jacobian`` is False; those of the effects'
+        parameters are forward differences (step ``step``), all perturbed
+        vectors evaluated as one batch that shares the unperturbed circuit's
         pole-residue form (no new eigen-decomposition).
         """
+        cols = np.arange(x.size) if columns is None else np.asarray(columns, int)
+        circuit = cols < self.nc
+        if not (self.analytic_jacobian and np.any(circuit)):
+            return self.difference_jacobian(x, step, cols)
+        out = np.empty((self.n_residuals, cols.size))
+        out[:, circuit] = self.circuit_jacobian(x, cols[circuit])
+        if not np.all(circuit):
+            out[:, ~circuit] = self.difference_jacobian(x, step, cols[~circuit])
+        return out
+
+    def difference_jacobian(self, x: np.ndarray, step: float = 1e-6, columns: np.ndarray | None = None
+                            ) -> np.ndarray:
+        """Forward-difference Jacobian (step ``step`` in the parameter vector), one batch of perturbed vectors."""
         cols = np.arange(x.size) if columns is None else columns
         X = np.vstack([x, x + step * np.eye(x.size)[cols]])
         R = self.residuals_batch(X)
         return (R[1:] - R[0]).T / step
+
+    @property
+    def n_residuals(self) -> int:
+        """Length of the residual vector (data residuals and the prior's)."""
+        return 2 * sum(m.size for m in self.measured.values()) + self._pidx.size
+
+    def value_slopes(self, x: np.ndarray, columns: np.ndarray) -> dict[str, np.ndarray]:
+        """Derivatives of the resolved element values with respect to circuit columns of the parameter vector.
+
+        Returns element name (lower case) to an array ``(len(columns),)``, SI
+        units per unit of the (log-ratio) column. An element that is a free
+        value itself has the closed form (``v``, or ``-(1 - k)`` for a
+        coupling); a ``.param`` reaches the elements through their
+        expressions, differentiated by central differences of the (cheap)
+        value resolution.
+        """
+        cols = np.asarray(columns, int)
+        v = self.values_of(x[: self.nc])
+        out: dict[str, np.ndarray] = {}
+        params = []
+        for c, j in enumerate(cols):
+            name = self.free[j].lower()
+            if name in self._param_keys:
+                params.append((c, j))
+            else:
+                out.setdefault(name, np.zeros(cols.size))[c] += -(1 - v[j]) if self.is_k[j] else v[j]
+        if params:
+            h, n = 1e-5, len(params)
+            Xp = np.repeat(np.asarray(x[None, : self.nc], float), 2 * n, axis=0)
+            for r, (_, j) in enumerate(params):
+                Xp[r, j] += h
+                Xp[n + r, j] -= h
+            V = self.values_of(Xp)
+            vals = self.circuit.resolve({name: V[:, i] for i, name in enumerate(self.free)}, check=False)
+            for key, val in vals.items():
+                val = np.broadcast_to(np.real(np.asarray(val, complex)), (2 * n,))
+                d = (val[:n] - val[n:]) / (2 * h)
+                if np.any(d != 0):
+                    slot = out.setdefault(key, np.zeros(cols.size))
+                    for r, (c, _) in enumerate(params):
+                        slot[c] += d[r]
+        return out
+
+    def circuit_jacobian(self, x: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """Analytic Jacobian columns of the circuit values, shape ``(n_residuals, len(columns))``.
+
+        The constant circuit's transfer functions are differentiated on the
+        full nodal system (:meth:`.network.ProbedConfiguration.transfer_derivatives`,
+        one factorisation per frequency for all columns), the closed loop of
+        the effects' branch changes and the port effects by the chain rule
+        (:meth:`.network.ProbedConfiguration.responses_tangent`). Branch
+        changes that scale with circuit values (a skin-effect resistance, a
+        magnetising inductance) are differentiated by a central difference
+        along each column's value change, which is exact for those linear in
+        the values; no eigen-decomposition beyond the unperturbed one.
+        """
+        cols = np.asarray(columns, int)
+        J = cols.size
+        xr = np.atleast_2d(np.asarray(x, float))
+        T, values = self._transfer(xr[:, : self.nc])
+        if any(np.isnan(t).all() for t in T):  # no response (an indefinite inductance matrix): constant residuals
+            return np.zeros((self.n_residuals, J))
+        slopes = self.value_slopes(xr[0], cols)
+        params = self.effect_params(xr)
+        dz = ddz = None
+        if self.branches:
+            dz = self._branch_dz(values, params, 1)
+            read = [k for k in self._branch_values if k in slopes]
+            moves = np.flatnonzero(np.any([slopes[k] != 0 for k in read], axis=0)) if read else np.zeros(0, int)
+            if moves.size:  # columns that move a value the branch changes read
+                h, n = 1e-6, moves.size
+                moved = {}
+                for key, v in values.items():
+                    base = np.ravel(np.asarray(v))[:1]
+                    d = slopes.get(key)
+                    moved[key] = (np.concatenate([base + h * d[moves], base - h * d[moves]]) if d is not None
+                                  else np.repeat(base, 2 * n))
+                dd = self._branch_dz(moved, params, 2 * n)
+                ddz = np.zeros((J,) + dz.shape[1:], complex)
+                ddz[moves] = (dd[:n] - dd[n:]) / (2 * h)
+        port_effects = [(e, p) for e, p in zip(self.effects, params) if type(e).port_map is not Effect.port_map]
+
+        def port_map(z):
+            slope = np.ones_like(z)
+            for e, p in port_effects:
+                slope = slope * e.port_slope(z, self.f, p)
+                z = e.port_map(z, self.f, p)
+            return z, slope
+
+        pred: dict[str, np.ndarray] = {}
+        dpred: dict[str, np.ndarray] = {}
+        for m in self.models:
+            z, dv = m.response_derivatives(values, slopes, self.s, dz, ddz, kept=True)
+            a, b = m.responses_tangent(z, dv, port_map if port_effects else None)
+            pred.update(a)
+            dpred.update(b)
+        parts, base = [], []
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            for n, meas in self.measured.items():
+                h = np.broadcast_to(pred[n], (1, self.f.size))[0]
+                e = np.log(h / meas)
+                de = np.broadcast_to(dpred[n], (J, self.f.size)) / h
+                if self._kernel is not None:
+                    fin = np.isfinite(e)
+                    de = np.where(fin, de, 0) @ self._kernel
+                    e = np.where(fin, e, 0) @ self._kernel
+                w = 1 / np.sqrt(2 * meas.size)
+                parts.append(np.concatenate([de.real, de.imag], axis=1) * w)
+                base.append(np.concatenate([e.real, e.imag]))
+        if self._pidx.size:
+            parts.append((self._pidx[None, :] == cols[:, None]) * self._pscale)
+            base.append(np.zeros(self._pidx.size))
+        D = np.concatenate(parts, axis=1)
+        D[:, ~np.isfinite(np.concatenate(base))] = 0.0  # a residual replaced by a constant
+        return np.where(np.isfinite(D), D, 0.0).T
 
     # ------------------------------------------------------------------ fitting
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
