@@ -77,6 +77,7 @@ from .spectral_uncertainty import (
     clock_null_mask,
     h1_log_sd,
     local_linear,
+    pooled,
     welch_averages,
 )
 from .timedomain import checked_values, zoh
@@ -564,11 +565,12 @@ MIN_BINS_ABOVE_DC = 4
 
 
 def _informative(resp: FrequencyResponse, fclk: float, n_averages: int) -> tuple[FrequencyResponse, np.ndarray]:
-    """The bins of an H1 estimate away from the PRBS nulls, and the standard deviation of ``ln H`` at each."""
+    """The bins of an H1 estimate away from the PRBS nulls, and the standard deviation of ``ln H`` at each (from the
+    coherence pooled over neighbouring bins)."""
     keep = ~clock_null_mask(resp.frequency_hz, fclk)
     coh = resp.coherence if resp.coherence is not None else np.ones(resp.frequency_hz.size)
-    sd = h1_log_sd(coh, n_averages)
-    return FrequencyResponse(resp.frequency_hz[keep], resp.values[keep], coh[keep], resp.name), sd[keep]
+    sd = h1_log_sd(pooled(coh[keep]), n_averages)
+    return FrequencyResponse(resp.frequency_hz[keep], resp.values[keep], coh[keep], resp.name), sd
 
 
 def run_lab(model: Model, configs: Sequence[str] | None = None, seed: int | None = 0, noise: bool = True,

@@ -66,7 +66,7 @@ from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from .fit import DiagnosisError, FitResult, FrequencyFit, configuration_ports, group_names, significant
 from .realise import realise_extended
 from .sections import section_candidates
-from .unmerge import missing_modes, search_unmerged
+from .unmerge import missing_modes, resolved_points, search_unmerged
 
 MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
 #: Selection stops once the cost is within this factor of the noise floor.
@@ -199,6 +199,8 @@ class _Context:
     prior: DesignPrior | None = None
     #: Per-point residual weights by response (:func:`.evidence.noise_weights`); empty: unweighted.
     weights: dict[str, np.ndarray] = field(default_factory=dict)
+    #: Points quiet enough to show resonances, by response (:func:`.unmerge.resolved_points`); empty: all.
+    resolved: dict[str, np.ndarray] = field(default_factory=dict)
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
             prior: DesignPrior | None | str = "same", couplings: Sequence[str] = ()) -> FrequencyFit:
@@ -360,6 +362,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     ctx.floor = floor["cost"]
     ctx.prior = prior
     ctx.weights = weights
+    ctx.resolved = resolved_points(sd)
     if prior is not None:
         moved = ctx.drift(baseline)
         _log(f"design prior: tolerance {prior.tolerance:g}; baseline moved {len(moved)} value(s) beyond it"
@@ -432,8 +435,14 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                         "a split of the design values with its couplings free, and the fit with it stays far above "
                         "the noise")
                 continue
+            if not chosen and best.couplings and best.objective > UNMERGE_ABOVE_FLOOR * floor["cost"]:
+                _refuse(pool, failed, best, new_cause, progress,
+                        f"a first cause with free couplings that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise",
+                        "a new section with its couplings free named first, and the fit with it stays far above "
+                        "the noise (free couplings take the share of a frequency-dependent effect)")
+                continue
             if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
-                    and not missing_modes(f, data, current.predicted)):
+                    and not missing_modes(f, data, current.predicted, ctx.resolved)):
                 _refuse(pool, failed, best, new_cause, progress,
                         "the model without it has every measured resonance and the split does not reach the noise",
                         "no measured resonance missing from the model without it, and the fit with it stays above "
@@ -676,9 +685,9 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
     if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
-                                    or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
+                                    or missing_modes(ctx.f, ctx.data, base.predicted, ctx.resolved) > 0):
         found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
-                                tail, free_couplings=not effects)
+                                tail, free_couplings=not effects, resolved=ctx.resolved)
         if found is not None and (best is None or found[0].objective < best.objective):
             best, um, merged = found
             best.structure = um.candidate.how
