@@ -115,7 +115,9 @@ def local_linear(frequency_hz: ArrayLike, values: ArrayLike, bin_sd: ArrayLike, 
     At each centre whose log band (halfway to the neighbouring centres) holds
     ``m >= 1`` bins, a straight line in frequency is fitted (least squares) to
     the complex values of the ``max(2, min(max_bins, m))`` bins nearest the
-    centre and evaluated at the centre. Unlike a band average it is not
+    centre and evaluated at the centre, provided the centre lies between
+    those bins (no extrapolation; otherwise the centre counts as holding no
+    bin). Unlike a band average it is not
     biased by the slope of the response, and with few bins it is hardly
     biased by its curvature (a band of 2.3 % averaged over a resonance
     narrower than the band flattens it); the noise it leaves is the bins'
@@ -143,7 +145,7 @@ def local_linear(frequency_hz: ArrayLike, values: ArrayLike, bin_sd: ArrayLike, 
     sd : numpy.ndarray
         Standard deviation of ``ln H`` there (``inf`` where no bin).
     m : numpy.ndarray of int
-        Bins in each band.
+        Bins in each band (0 where the centre would be extrapolated).
     """
     f = np.asarray(frequency_hz, float)
     h = np.asarray(values, complex)
@@ -161,6 +163,9 @@ def local_linear(frequency_hz: ArrayLike, values: ArrayLike, bin_sd: ArrayLike, 
         lo = max(0, min(i - k, f.size - 2 * k))
         cand = np.arange(lo, min(f.size, lo + 2 * k))
         sel = cand[np.argsort(np.abs(f[cand] - c[j]), kind="stable")[:k]]
+        if not f[sel].min() <= c[j] <= f[sel].max():  # no extrapolation (e.g. at the edge of a left-out null)
+            m[j] = 0
+            continue
         x = (f[sel] - c[j]) / max(float(np.ptp(f[sel])), 1e-300)
         A = np.column_stack([np.ones(sel.size), x])
         w = np.linalg.pinv(A)[0]  # weights giving the line's value at the centre

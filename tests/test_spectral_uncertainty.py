@@ -99,6 +99,9 @@ def test_local_linear_leaves_bands_without_bins_empty():
     assert m.tolist() == [1, 3, 0, 2]
     assert np.isnan(vals[2]) and np.isinf(sd[2])
     assert np.all(np.isfinite(sd[[0, 1, 3]]))
+    # a centre beyond the bins its band holds (the edge of a left-out stretch) is not extrapolated
+    vals, sd, m = local_linear(f, h, np.full(f.size, 0.1), np.array([14.0, 29.0, 60.0]))
+    assert m[1] == 0 and np.isnan(vals[1])
 
 
 def test_response_csv_uncertainty_columns_round_trip(tmp_path):
