@@ -5,7 +5,10 @@ thesis's laboratory and measured through a model of the thesis's measurement
 chain, and the six frequency responses Zlvoc, Zlvsc, Zhvoc, Zhvsc, Rlvhv,
 Rhvlv are estimated from the records exactly as from real data: H1 (Welch,
 Hann, 62.5 % overlap, half-record segments), two clock frequencies combined
-at the thesis's transition frequencies, band averaged onto a log grid.
+at the thesis's transition frequencies, then written on a log grid where the
+records carry information (:func:`run_lab`): bins at the PRBS clock nulls
+left out, each value a local line through the nearest bins, with the
+standard deviation of ``ln H`` from the coherence beside it.
 
 What is modelled (thesis 5.1.1-5.1.3; :class:`LabSettings`):
 
@@ -651,8 +654,12 @@ def virtual_lab(model: Model, configs: Sequence[str] | None = None, seed: int | 
 
     Each configuration is perturbed with the 20 kHz and the 2 kHz clock,
     measured (:func:`perturb`, :func:`measure_response`), combined at the
-    transition frequency (:func:`pris_cosim.spectral.synthesise_two_clock`) and
-    band-averaged onto ``points_per_decade`` log-spaced points over [fmin, fmax].
+    transition frequency (:func:`pris_cosim.spectral.synthesise_two_clock`)
+    and written at those of ``points_per_decade`` log-spaced points over [fmin, fmax]
+    whose band holds a bin of every response away from the PRBS clock nulls
+    (from four bins above DC), each value a straight line through the (at
+    most five) nearest bins, with the standard deviation of ``ln H`` from the
+    coherence in ``uncertainty``.
 
     Parameters
     ----------
