@@ -77,7 +77,7 @@ def pooled(values: ArrayLike, pool: int = POOL_BINS) -> NDArray[np.float64]:
 
 def welch_averages(n_samples: int, nperseg: int, overlap: float) -> int:
     """Segments a Welch estimate averages: ``1 + (N - nperseg) // (nperseg - round(overlap nperseg))``."""
-    step = max(1, nperseg - int(round(overlap * nperseg)))
+    step = max(1, nperseg - round(overlap * nperseg))
     return 1 + max(0, n_samples - nperseg) // step
 
 

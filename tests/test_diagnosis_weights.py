@@ -8,7 +8,11 @@ import pytest
 from estimation.diagnosis import DiagnosisError, diagnose_frequency
 from estimation.diagnosis.evidence import noise_floor, noise_weights
 from estimation.diagnosis.fit import FrequencyFit
-from estimation.diagnosis.unmerge import MAX_RESONANCE_SD, missing_modes, resolved_points
+from estimation.diagnosis.unmerge import (
+    MAX_RESONANCE_SD,
+    missing_modes,
+    resolved_points,
+)
 from pris_cosim.models import get_model
 
 

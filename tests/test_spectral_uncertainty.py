@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from scipy import signal as sps
@@ -84,7 +86,7 @@ def test_local_linear_is_exact_on_a_straight_line_and_its_sd_is_that_of_a_mean()
     s = np.full(f.size, 0.02)
     vals, sd, m = local_linear(f, h, s, centres, max_bins=5)
     edges = log_band_edges(centres)
-    np.testing.assert_array_equal(m, [np.count_nonzero((f >= a) & (f < b)) for a, b in zip(edges[:-1], edges[1:])])
+    np.testing.assert_array_equal(m, [np.count_nonzero((f >= a) & (f < b)) for a, b in itertools.pairwise(edges)])
     ok = m > 0
     np.testing.assert_allclose(vals[ok], (3 + 0.01 * centres[ok]) + 1j * (1 - 0.002 * centres[ok]), rtol=1e-12)
     # five bins centred on the centre: the line's value there is their mean, sd s / sqrt(5)
@@ -110,7 +112,7 @@ def test_response_csv_uncertainty_columns_round_trip(tmp_path):
                              uncertainty={"Zin": np.array([0.01, 0.02, 0.5])})
     p = tmp_path / "r.csv"
     write_response_csv(p, data)
-    header = [ln for ln in p.read_text().splitlines() if not ln.startswith("#")][0]
+    header = next(ln for ln in p.read_text().splitlines() if not ln.startswith("#"))
     assert header == "frequency_hz,Zin_mag,Zin_phase_deg,Zin_ln_sd,Rab_mag,Rab_phase_deg"
     back = read_response_csv(p)
     assert list(back.uncertainty) == ["Zin"]
