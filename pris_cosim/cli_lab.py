@@ -5,7 +5,9 @@
 model in the six test configurations with the thesis's LV and HV PRIS
 sources, measures through the anti-alias filter and the 16-bit ADC, and
 writes the six estimated responses in the interfaces CSV format
-(``frequency_hz,Zlvoc_mag,Zlvoc_phase_deg,...``). The default model is the
+(``frequency_hz,Zlvoc_mag,Zlvoc_phase_deg,Zlvoc_ln_sd,...``: ``NAME_ln_sd`` is
+the standard deviation of ``ln|H|`` from the coherence; only frequencies the
+PRBS excites are written, see :func:`pris_cosim.virtual_lab.run_lab`). The default model is the
 built-in ``hv-6section-freqdep`` (passive six-section transformer with the
 frequency-dependent effects of (2.4)-(2.6)). ``--plots DIR`` writes the
 measured-versus-analytic responses (Figs. 5.5 and 5.9 analogues), and the

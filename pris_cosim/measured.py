@@ -13,8 +13,11 @@ Interfaces CSV (:func:`read_response_csv`, :func:`write_response_csv`)
     ``#`` comment lines, then a header ``frequency_hz,NAME_mag,NAME_phase_deg``
     or ``frequency_hz,NAME_re,NAME_im`` (any number of responses, each as a
     pair of columns), then one row per frequency in Hz, strictly increasing.
-    Optionally the rows are split into segments by lines
-    ``<segment> LABEL # comment`` after the header.
+    A response may have a third, optional column ``NAME_ln_sd``: the
+    standard deviation of ``ln|H|`` (equally, of the phase in radians) at
+    each frequency, > 0 (the virtual lab writes it from the coherence);
+    files without it read as before. Optionally the rows are split into
+    segments by lines ``<segment> LABEL # comment`` after the header.
 Multi-segment instrument CSV (:func:`read_multisegment_csv`)
     Header ``FREQUENCY [Hz],MAG [O],PHASE [deg]`` (one response, named
     ``Zin`` by default) and segments introduced by ``<segment> LABEL #

@@ -151,12 +151,17 @@ class MeasuredResponses:
         Free comment lines from the file, without their comment markers.
     segment : str, optional
         Segment label for data taken from a multi-segment file.
+    uncertainty : dict of str to numpy.ndarray, optional
+        Standard deviation of ``ln|H|`` (and of the phase in radians) at each
+        frequency, per response (a subset of ``responses``; dimensionless,
+        0.01 is 1 % / 0.57 deg), e.g. from the coherence of an H1 estimate.
+        Empty when the data do not say.
 
     Raises
     ------
     ValueError
         If the arrays are inconsistent (shape, non-finite values, frequency
-        order).
+        order, an uncertainty not positive or of an unknown response).
     """
 
     frequency_hz: np.ndarray
@@ -164,6 +169,7 @@ class MeasuredResponses:
     source: str = ""
     comments: list[str] = field(default_factory=list)
     segment: str | None = None
+    uncertainty: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         f = np.array(self.frequency_hz, dtype=float)
@@ -180,8 +186,17 @@ class MeasuredResponses:
             if not np.all(np.isfinite(a)):
                 raise ValueError(f"response {name!r} contains NaN or infinite values")
             resp[name] = a
+        unc: dict[str, np.ndarray] = {}
+        for name, values in dict(self.uncertainty or {}).items():
+            if name not in resp:
+                raise ValueError(f"uncertainty of {name!r}, which is not a response ({', '.join(resp)})")
+            u = np.array(values, dtype=float)
+            if u.shape != f.shape or not np.all(np.isfinite(u) & (u > 0)):
+                raise ValueError(f"uncertainty of {name!r} must hold one finite positive value per frequency")
+            unc[name] = u
         self.frequency_hz = f
         self.responses = resp
+        self.uncertainty = unc
         self.source = "" if self.source is None else str(self.source)
         self.comments = [str(c) for c in self.comments]
         if self.segment is not None:
@@ -248,6 +263,7 @@ class MeasuredResponses:
         return MeasuredResponses(
             self.frequency_hz[keep].copy(),
             {k: v[keep].copy() for k, v in self.responses.items()},
+            uncertainty={k: v[keep].copy() for k, v in self.uncertainty.items()},
             source=self.source,
             comments=list(self.comments),
             segment=self.segment,
@@ -631,6 +647,8 @@ def _comment_lines(comments: Iterable[str]) -> list[str]:
 # ---------------------------------------------------------------------------
 
 _SUFFIX_RE = re.compile(r"(.+)_(mag|phase_deg|re|im)", re.IGNORECASE)
+#: Optional uncertainty column of a response in the interfaces CSV: ``NAME_ln_sd``.
+_SD_SUFFIX_RE = re.compile(r"(.+)_ln_sd", re.IGNORECASE)
 
 
 def _header_cells(header: str) -> list[str]:

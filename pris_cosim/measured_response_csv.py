@@ -19,6 +19,7 @@ from typing import IO, Sequence
 import numpy as np
 
 from .measured_core import (
+    _SD_SUFFIX_RE,
     _SUFFIX_RE,
     _UNIT_SCALE,
     MeasuredDataError,
@@ -201,10 +202,24 @@ def _select_segment(
     )
 
 
+def _sd_columns(path: PathLike, line: int, cells: list[str], names: Sequence[str]) -> dict[str, int]:
+    """The optional ``NAME_ln_sd`` columns of an interfaces-format header: ``{name: column}``."""
+    out: dict[str, int] = {}
+    for j, c in enumerate(cells[1:], start=1):
+        m = _SD_SUFFIX_RE.fullmatch(c)
+        if m is None:
+            continue
+        if m.group(1) not in names:
+            raise MeasuredDataError(path, f"uncertainty column of no response (responses: {', '.join(names)})",
+                                    line, j + 1, c)
+        out[m.group(1)] = j
+    return out
+
+
 def _interfaces_columns(
     path: PathLike, line: int, cells: list[str]
 ) -> list[tuple[str, str, int, int]]:
-    """Map an interfaces-format header to ``[(name, form, col_a, col_b)]``."""
+    """Map an interfaces-format header to ``[(name, form, col_a, col_b)]`` (``NAME_ln_sd`` columns skipped)."""
     if cells[0].lower() != "frequency_hz":
         raise MeasuredDataError(
             path, "first column must be 'frequency_hz'", line, 1, cells[0]
@@ -220,11 +235,13 @@ def _interfaces_columns(
                 path, f"duplicated column (also column {seen[c] + 1})", line, j + 1, c
             )
         seen[c] = j
+        if _SD_SUFFIX_RE.fullmatch(c):
+            continue
         m = _SUFFIX_RE.fullmatch(c)
         if not m:
             raise MeasuredDataError(
                 path,
-                "unknown column; expected NAME_mag + NAME_phase_deg or NAME_re + NAME_im",
+                "unknown column; expected NAME_mag + NAME_phase_deg or NAME_re + NAME_im (and optional NAME_ln_sd)",
                 line, j + 1, c,
             )
         name, kind = m.group(1), m.group(2).lower()
@@ -330,7 +347,14 @@ def _read_segmented(
                 responses[rname] = _polar(data[:, ja], data[:, jb])
             else:
                 responses[rname] = data[:, ja] + 1j * data[:, jb]
+        uncertainty = {}
+        for rname, j in _sd_columns(path, sf.header_line, cells, [c[0] for c in cols]).items():
+            bad = np.flatnonzero(~(data[:, j] > 0))
+            if bad.size:
+                raise MeasuredDataError(path, "uncertainty must be > 0", lines_no[int(bad[0])], j + 1, cells[j])
+            uncertainty[rname] = data[:, j]
     else:
+        uncertainty = {}
         fscale, form, pscale = _instrument_columns(path, sf.header_line, cells)
         data = _parse_rows(path, rows, cells)
         _check_count(path, data.shape[0], last_line)
@@ -347,7 +371,8 @@ def _read_segmented(
     if seg.comment:
         comments.append(seg.comment)
     comments.extend(seg.comments)
-    return _responses_in_range(path, MeasuredResponses(f, responses, source=os.fspath(path), comments=comments, segment=seg.label))
+    return _responses_in_range(path, MeasuredResponses(f, responses, source=os.fspath(path), comments=comments,
+                                                       segment=seg.label, uncertainty=uncertainty))
 
 
 def read_response_csv(path: PathLike, segment: str | int | None = None) -> MeasuredResponses:
@@ -358,7 +383,9 @@ def read_response_csv(path: PathLike, segment: str | int | None = None) -> Measu
     path : str or os.PathLike
         CSV file: ``#`` comment lines, header ``frequency_hz,`` followed by
         ``NAME_mag,NAME_phase_deg`` (magnitude, phase in degrees) and/or
-        ``NAME_re,NAME_im`` column pairs, then rows of numbers.  Frequencies in
+        ``NAME_re,NAME_im`` column pairs, each optionally with a ``NAME_ln_sd``
+        column (standard deviation of ``ln|H|`` and of the phase in radians,
+        > 0; in :attr:`MeasuredResponses.uncertainty`), then rows of numbers.  Frequencies in
         Hz, > 0, strictly increasing, at least 2 rows.  Optional
         ``<segment> LABEL # comment`` lines after the header split the rows
         into segments.  Trailing ``# ...`` text on a data row is ignored.
@@ -482,7 +509,8 @@ def write_response_csv(
         A single data set with a ``segment`` label also gets its marker.
     form : {"magphase", "reim"}
         ``NAME_mag,NAME_phase_deg`` (magnitude, degrees) or
-        ``NAME_re,NAME_im`` columns.
+        ``NAME_re,NAME_im`` columns; a response with an uncertainty (in every
+        segment) also gets its ``NAME_ln_sd`` column.
 
     Notes
     -----
@@ -503,8 +531,10 @@ def write_response_csv(
         if n != n.strip():
             raise ValueError(f"response name {n!r} has outer spaces")
     header = ["frequency_hz"]
+    with_sd = [n for n in names if all(n in s.uncertainty for s in segs)]
     for n in names:
         header += [f"{n}_mag", f"{n}_phase_deg"] if form == "magphase" else [f"{n}_re", f"{n}_im"]
+        header += [f"{n}_ln_sd"] if n in with_sd else []
     single = len(segs) == 1
 
     def write(fh: IO) -> None:
@@ -525,6 +555,8 @@ def write_response_csv(
                     cols += [np.abs(z).tolist(), np.degrees(np.angle(z)).tolist()]
                 else:
                     cols += [z.real.tolist(), z.imag.tolist()]
+                if n in with_sd:
+                    cols.append(s.uncertainty[n].tolist())
             for row in zip(*cols):
                 fh.write(",".join([_fmt(v) for v in row]) + "\n")
 

@@ -5,7 +5,10 @@ thesis's laboratory and measured through a model of the thesis's measurement
 chain, and the six frequency responses Zlvoc, Zlvsc, Zhvoc, Zhvsc, Rlvhv,
 Rhvlv are estimated from the records exactly as from real data: H1 (Welch,
 Hann, 62.5 % overlap, half-record segments), two clock frequencies combined
-at the thesis's transition frequencies, band averaged onto a log grid.
+at the thesis's transition frequencies, then written on a log grid where the
+records carry information (:func:`run_lab`): bins at the PRBS clock nulls
+left out, each value a local line through the nearest bins, with the
+standard deviation of ``ln H`` from the coherence beside it.
 
 What is modelled (thesis 5.1.1-5.1.3; :class:`LabSettings`):
 
@@ -65,7 +68,21 @@ from .measured import MeasuredResponses, Waveforms, write_response_csv
 from .mna import MNA
 from .models import Configuration, Model
 from .signals import lfsr_prbs
-from .spectral import FrequencyResponse, estimate_response, synthesise_two_clock
+from .spectral import (
+    DEFAULT_OVERLAP,
+    FrequencyResponse,
+    estimate_response,
+    synthesise_two_clock,
+)
+from .spectral_uncertainty import (
+    LOCAL_BINS,
+    NULL_WIDTH,
+    clock_null_mask,
+    h1_log_sd,
+    local_linear,
+    pooled,
+    welch_averages,
+)
 from .timedomain import checked_values, zoh
 
 __all__ = [
@@ -545,6 +562,20 @@ class LabResult:
     wall_s: dict[str, float] = field(default_factory=dict)
 
 
+#: Lowest frequency written: at least this many Welch bins above DC (the Hann window's main lobe is
+#: two bins wide on each side; below, the estimate mixes in the record's mean and its trend).
+MIN_BINS_ABOVE_DC = 4
+
+
+def _informative(resp: FrequencyResponse, fclk: float, n_averages: int) -> tuple[FrequencyResponse, np.ndarray]:
+    """The bins of an H1 estimate away from the PRBS nulls, and the standard deviation of ``ln H`` at each (from the
+    coherence pooled over neighbouring bins)."""
+    keep = ~clock_null_mask(resp.frequency_hz, fclk)
+    coh = resp.coherence if resp.coherence is not None else np.ones(resp.frequency_hz.size)
+    sd = h1_log_sd(pooled(coh[keep]), n_averages)
+    return FrequencyResponse(resp.frequency_hz[keep], resp.values[keep], coh[keep], resp.name), sd
+
+
 def run_lab(model: Model, configs: Sequence[str] | None = None, seed: int | None = 0, noise: bool = True,
             quick: bool = False, settings: LabSettings | None = None, fmin: float = 10.0,
             fmax: float = 100e3, points_per_decade: int = 100, keep_records: bool | Sequence[str] = False,
@@ -562,29 +593,41 @@ def run_lab(model: Model, configs: Sequence[str] | None = None, seed: int | None
     records: dict[tuple[str, str], LabRecord] = {}
     wall: dict[str, float] = {}
     points = int(round(points_per_decade * math.log10(fmax / fmin))) + 1
+    centres = np.geomspace(fmin, fmax, points)
+    centres[0], centres[-1] = fmin, fmax
     grid_vals: dict[str, np.ndarray] = {}
-    f_grid = None
+    grid_sd: dict[str, np.ndarray] = {}
+    supported = np.ones(points, bool)
+    lowest = fmin
     for c in names:
         t0 = time.perf_counter()
         cfg = model.configuration(c)
         rname = cfg.responses[0].name
         ft = float(st.transitions.get(rname, 2000.0 / 3))
-        rec_h = perturb(model, cfg.name, "high", st, seed, noise)
-        rh = measure_response(rec_h, fmax=min(rec_h.fs / 2, 1.1 * fmax), nperseg_fraction=st.nperseg_fraction)
-        if cfg.name in keep:
-            records[(cfg.name, "high")] = rec_h
-        del rec_h
-        rec_l = perturb(model, cfg.name, "low", st, seed, noise)
-        rl = measure_response(rec_l, fmax=min(fmax, 3 * ft), nperseg_fraction=st.nperseg_fraction)
-        if cfg.name in keep:
-            records[(cfg.name, "low")] = rec_l
-        del rec_l
-        rs = synthesise_two_clock(rh, rl, ft, name=rname)
-        g = rs.log_resample(fmin, fmax, points)
-        f_grid = g.frequency_hz
-        grid_vals[rname] = g.values
+        estimates = []
+        for clock, top in (("high", min(st.chain.fs / 2, 1.1 * fmax)), ("low", min(fmax, 3 * ft))):
+            rec = perturb(model, cfg.name, clock, st, seed, noise)
+            resp = measure_response(rec, fmax=top, nperseg_fraction=st.nperseg_fraction)
+            seg = max(16, int(rec.time_s.size * st.nperseg_fraction))
+            n_avg = welch_averages(rec.time_s.size, seg, DEFAULT_OVERLAP)
+            if clock == "low":  # the estimate the lowest frequencies come from
+                lowest = max(lowest, MIN_BINS_ABOVE_DC * rec.fs / seg)
+            estimates.append((resp, *_informative(resp, rec.source.fclk, n_avg)))
+            if cfg.name in keep:
+                records[(cfg.name, clock)] = rec
+            del rec
+        (rh, rh_used, sd_h), (rl, rl_used, sd_l) = estimates
+        rs = synthesise_two_clock(rh_used, rl_used, ft, name=rname)
+        sd = np.concatenate((sd_l[rl_used.frequency_hz < ft], sd_h[rh_used.frequency_hz >= ft]))
+        if sd.size != rs.frequency_hz.size:
+            raise AssertionError("two-clock synthesis changed the bins")  # pragma: no cover
+        grid_vals[rname], grid_sd[rname], m = local_linear(rs.frequency_hz, rs.values, sd, centres)
+        supported &= m > 0
         high[rname], low[rname], synth[rname] = rh, rl, rs
         wall[cfg.name] = time.perf_counter() - t0
+    rows = supported & (centres >= lowest * (1 - 1e-9))
+    if np.count_nonzero(rows) < 2:
+        raise CircuitError(f"virtual lab: fewer than 2 frequencies in [{fmin:g}, {fmax:g}] Hz hold an estimate")
     ch = st.chain
     comments = [
         f"virtual lab (thesis 5.1) of model {model.name!r}: {'noisy' if noise else 'noise-free'}, seed {seed}",
@@ -593,9 +636,15 @@ def run_lab(model: Model, configs: Sequence[str] | None = None, seed: int | None
         f"ADC {ch.adc_bits} bit +-{ch.adc_range_v:g} V, noise {ch.noise_rms_v:g} V RMS at ADC input",
         "transitions: " + ", ".join(f"{synth_name} {st.transitions.get(synth_name, 2000 / 3):.1f} Hz"
                                     for synth_name in grid_vals),
+        (f"{points_per_decade} points per decade, each a local straight line through the (at most {LOCAL_BINS}) "
+         f"nearest bins; frequencies whose band holds no bin away from the PRBS clock nulls "
+         f"(+-{100 * NULL_WIDTH:g} % of the clock) are left out, and those below {MIN_BINS_ABOVE_DC} bins above "
+         f"DC ({lowest:.3g} Hz)"),
+        "NAME_ln_sd: standard deviation of ln|H| and of the phase (rad) from the coherence",
     ]
-    assert f_grid is not None
-    return LabResult(MeasuredResponses(f_grid, grid_vals, comments=comments), high, low, synth, st, records, wall)
+    measured = MeasuredResponses(centres[rows], {k: v[rows] for k, v in grid_vals.items()}, comments=comments,
+                                 uncertainty={k: v[rows] for k, v in grid_sd.items()})
+    return LabResult(measured, high, low, synth, st, records, wall)
 
 
 def virtual_lab(model: Model, configs: Sequence[str] | None = None, seed: int | None = 0, noise: bool = True,
@@ -605,8 +654,12 @@ def virtual_lab(model: Model, configs: Sequence[str] | None = None, seed: int | 
 
     Each configuration is perturbed with the 20 kHz and the 2 kHz clock,
     measured (:func:`perturb`, :func:`measure_response`), combined at the
-    transition frequency (:func:`pris_cosim.spectral.synthesise_two_clock`) and
-    band-averaged onto ``points_per_decade`` log-spaced points over [fmin, fmax].
+    transition frequency (:func:`pris_cosim.spectral.synthesise_two_clock`)
+    and written at those of ``points_per_decade`` log-spaced points over [fmin, fmax]
+    whose band holds a bin of every response away from the PRBS clock nulls
+    (from four bins above DC), each value a straight line through the (at
+    most five) nearest bins, with the standard deviation of ``ln H`` from the
+    coherence in ``uncertainty``.
 
     Parameters
     ----------

@@ -96,7 +96,9 @@ def test_steady_state_start_is_periodic(model):
 def test_round_trip_noise_free_recovers_the_analytic_responses(model, clean):
     assert clean.measured.names == SIX
     f = clean.measured.frequency_hz
-    assert f[0] == pytest.approx(10.0) and f[-1] == pytest.approx(100e3)
+    # the first frequency whose band holds a bin of the low clock's (1.95 Hz), the last below 100 kHz (the fifth
+    # null of the 20 kHz clock)
+    assert 10.0 <= f[0] < 14.0 and 90e3 < f[-1] < 100e3
     errors = vl.round_trip_errors(clean.measured, model, 10.0, 10e3)
     for name in SIX:
         db, deg = errors[name]
@@ -144,13 +146,49 @@ def test_csv_round_trip(tmp_path, noisy):
     path = tmp_path / "lab.csv"
     vl.write_lab_csv(path, noisy.measured)
     header = [ln for ln in path.read_text().splitlines() if not ln.startswith("#")][0]
-    assert header == "frequency_hz," + ",".join(f"{n}_mag,{n}_phase_deg" for n in SIX)
+    assert header == "frequency_hz," + ",".join(f"{n}_mag,{n}_phase_deg,{n}_ln_sd" for n in SIX)
     back = read_response_csv(path)
     assert back.names == SIX
     np.testing.assert_array_equal(back.frequency_hz, noisy.measured.frequency_hz)
     for n in SIX:
         np.testing.assert_allclose(back.responses[n], noisy.measured.responses[n], rtol=1e-13, atol=0)
+        np.testing.assert_allclose(back.uncertainty[n], noisy.measured.uncertainty[n], rtol=1e-15, atol=0)
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+@pytest.mark.slow
+def test_no_row_without_excitation(noisy):
+    """No frequency near a multiple of the 20 kHz clock (the PRBS nulls), none below four low-clock bins, and a
+    finite positive standard deviation at every point."""
+    st = noisy.settings
+    f = noisy.measured.frequency_hz
+    x = f / st.lv.fclk
+    assert not np.any((np.abs(x - np.round(x)) < 0.08) & (np.round(x) >= 1))
+    assert f[-1] < 100e3 * (1 - 0.08 / 5)
+    bin_low = noisy.low["Zlvoc"].frequency_hz[1] - noisy.low["Zlvoc"].frequency_hz[0]
+    assert f[0] >= 4 * bin_low * (1 - 1e-9)
+    for n in SIX:
+        sd = noisy.measured.uncertainty[n]
+        assert np.all(np.isfinite(sd) & (sd > 0))
+
+
+@pytest.mark.slow
+def test_truth_fits_the_lab_output_near_the_noise_floor():
+    """The quick lab of hv-6section-freqdep against the model's own analytic responses: within 3 x the noise
+    floor of the weighted cost (each point weighted by its stated standard deviation)."""
+    from estimation.diagnosis.evidence import noise_floor, noise_weights
+
+    truth = get_model("hv-6section-freqdep")
+    m = vl.run_lab(truth, quick=True, seed=0).measured
+    f = m.frequency_hz
+    ref = truth.response_set().evaluate(f)
+    u = noise_weights(m.uncertainty)
+    cost = sum(np.mean(u[n] ** 2 * np.abs(np.log(ref[n] / m.responses[n])) ** 2) for n in SIX)
+    floor = noise_floor(f, m.responses, m.uncertainty)["cost"]
+    assert cost < 3 * floor
+    # unweighted, the noisy points (PRBS roll-off above 20 kHz, Zlvsc below 30 Hz) dominate by far
+    plain = sum(np.mean(np.abs(np.log(ref[n] / m.responses[n])) ** 2) for n in SIX)
+    assert plain > 100 * floor
 
 
 @pytest.mark.slow

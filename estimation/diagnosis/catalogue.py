@@ -100,6 +100,9 @@ def winding_groups(circuit: Circuit, ports: Sequence[str], names: Mapping[str, s
         ind = {k: v for k, v in ind.items() if v}
     res["all"] = tuple(r for ch in chains for r in ch.resistors)
     ind["all"] = tuple(i for ch in chains for i in ch.inductors)
+    core = core_loop_inductor(circuit)
+    if core is not None and core not in ind["all"]:
+        ind["core"] = (core,)
     return Groups(res, ind, core_loss_resistor(circuit), circuit.require_node(ports[0]) if ports else "")
 
 
@@ -110,6 +113,15 @@ def core_loss_resistor(circuit: Circuit) -> str | None:
             if set(r.nodes) == set(l.nodes):
                 return r.name
     return None
+
+
+def core_loop_inductor(circuit: Circuit) -> str | None:
+    """The inductor of the core-loss loop ``Lc || Rc`` (the magnetising branch), if any."""
+    rc = core_loss_resistor(circuit)
+    if rc is None:
+        return None
+    nodes = set(circuit.element(rc).nodes)
+    return next((l.name for l in circuit.inductors() if set(l.nodes) == nodes), None)
 
 
 def _p(p: Mapping[str, np.ndarray], name: str) -> np.ndarray:
@@ -532,6 +544,8 @@ def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, 
             out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
         elif cause == "magnetising-inductance" and form != "relaxation":
             out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
+            if form == "thesis" and "core" in groups.inductors:  # the core loop's own inductance, lossless (2.5)
+                out.append(MagnetisingInductance(form=form, group="core", f_ref=f_ref, f_max=f_max))
         elif cause == "core-loss" and form != "relaxation":
             out.append(CoreLoss(form=form, group="all", f_ref=f_ref, f_max=f_max))
     if one_port and cause == "stray-capacitance":

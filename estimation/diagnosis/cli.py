@@ -126,7 +126,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         if circuit is not None and not args.port:
             raise DiagnosisError("a netlist baseline needs --port")
         diag = diagnose_frequency(data.frequency_hz, data.responses, model=model, circuit=circuit, port=args.port,
-                                  tolerance=args.tolerance)
+                                  tolerance=args.tolerance, uncertainty=getattr(data, "uncertainty", None) or None)
         if args.report:
             write_report(diag, args.report, source=Path(args.measured).name + (f" [{args.segment}]" if args.segment else ""))
     out = diag.as_json()

@@ -60,13 +60,13 @@ from pris_cosim.frf import Response
 from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
 
 from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
-from .evidence import band_table, localise, noise_floor, resonance_comparison, unexplained_bands
+from .evidence import band_table, localise, noise_floor, noise_weights, resonance_comparison, unexplained_bands
 from .holdout import held_out_gain
 from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from .fit import DiagnosisError, FitResult, FrequencyFit, configuration_ports, group_names, significant
 from .realise import realise_extended
 from .sections import section_candidates
-from .unmerge import missing_modes, search_unmerged
+from .unmerge import missing_modes, resolved_points, search_unmerged
 
 MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
 #: Selection stops once the cost is within this factor of the noise floor.
@@ -197,12 +197,16 @@ class _Context:
     nominal: Circuit | None = None
     floor: float = 0.0
     prior: DesignPrior | None = None
+    #: Per-point residual weights by response (:func:`.evidence.noise_weights`); empty: unweighted.
+    weights: dict[str, np.ndarray] = field(default_factory=dict)
+    #: Points quiet enough to show resonances, by response (:func:`.unmerge.resolved_points`); empty: all.
+    resolved: dict[str, np.ndarray] = field(default_factory=dict)
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
             prior: DesignPrior | None | str = "same", couplings: Sequence[str] = ()) -> FrequencyFit:
         """The fit of ``circuit`` with ``effects`` (``couplings``: K elements fitted too, see :class:`.fit.FrequencyFit`)."""
         return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
-                            self.scale, self.prior if isinstance(prior, str) else prior, couplings)
+                            self.scale, self.prior if isinstance(prior, str) else prior, couplings, self.weights)
 
     def drift(self, r: FitResult) -> list[dict[str, Any]]:
         """Values of ``r`` moved beyond the design tolerance (none without a prior)."""
@@ -238,6 +242,7 @@ def diagnose_frequency(
     causes: Sequence[str] | None = None,
     progress: bool = True,
     tolerance: float = DEFAULT_TOLERANCE,
+    uncertainty: Mapping[str, np.ndarray] | None = None,
 ) -> Diagnosis:
     """Diagnose measured frequency responses against a baseline model.
 
@@ -266,6 +271,12 @@ def diagnose_frequency(
         a log-normal prior of that width around the design values
         (:mod:`.prior`); ``inf`` leaves the values free. No effect on a
         lumped baseline fitted to the data.
+    uncertainty : mapping, optional
+        Response name to the standard deviation of ``ln H`` at each frequency
+        (e.g. a response CSV's ``NAME_ln_sd`` column). Each residual is then
+        weighted by its inverse (scaled to a mean square of one per response),
+        and the noise floor is that of the weighted cost, its scale read from
+        the data (:func:`.evidence.noise_floor`).
 
     Returns
     -------
@@ -276,13 +287,13 @@ def diagnose_frequency(
     with threadpool_limits(limits=1):  # small matrices: BLAS threads only contend for the cores
         try:
             return _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_gain, min_step_gain,
-                             max_causes, causes, progress, tolerance)
+                             max_causes, causes, progress, tolerance, uncertainty)
         except CircuitError as exc:
             raise DiagnosisError(f"baseline: {exc}") from None
 
 
 def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_gain, min_step_gain, max_causes,
-              causes, progress, tolerance=DEFAULT_TOLERANCE) -> Diagnosis:
+              causes, progress, tolerance=DEFAULT_TOLERANCE, uncertainty=None) -> Diagnosis:
     t0 = time.perf_counter()
     if not (isinstance(tolerance, (int, float)) and tolerance > 0):
         raise DiagnosisError(f"--tolerance must be a positive number or inf, got {tolerance!r}")
@@ -297,6 +308,10 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     for k, v in data.items():
         if v.shape != f.shape or not np.all(np.isfinite(v)) or np.any(v == 0):
             raise DiagnosisError(f"response {k!r}: values must be finite, non-zero and one per frequency")
+    sd = {k: np.asarray(v, float) for k, v in (uncertainty or {}).items()}
+    for k, v in sd.items():
+        if k not in data or v.shape != f.shape or not np.all(np.isfinite(v) & (v > 0)):
+            raise DiagnosisError(f"uncertainty of {k!r}: one finite positive value per frequency of a measured response")
     if circuit is not None:
         if port is None:
             raise DiagnosisError("a netlist baseline needs --port")
@@ -312,24 +327,27 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if model is None:
         if len(data) != 1:
             raise DiagnosisError(f"no baseline given: one-port data expected, got responses {', '.join(data)}")
+        sd = {"Zin": next(iter(sd.values()))} if sd else {}
         data = {"Zin": next(iter(data.values()))}
-    floor = noise_floor(f, data)
+    floor = noise_floor(f, data, sd)
+    weights = noise_weights(sd)
     prior = None
     # ---- baseline
     if model is None:
         starts = lumped_from_data(f, data["Zin"])
-        fits = [FrequencyFit(m.circuit, list(m.configurations.values()), f, data).fit() for m in starts]
+        fits = [FrequencyFit(m.circuit, list(m.configurations.values()), f, data, weights=weights).fit()
+                for m in starts]
         best_i = int(np.argmin([r.cost for r in fits]))
         baseline = fits[best_i]
         model = Model("lumped-rlc", "Lumped R-L-C fitted to the data", starts[best_i].circuit,
                       starts[best_i].configurations, family=("lumped",))
         _log(f"no baseline given: lumped R-L-C fitted (cost {baseline.cost:.4g})", progress)
     else:
-        design = FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed)
+        design = FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed, weights=weights)
         prior = design_prior(dict(zip(design.free, design.start)), tolerance, floor["cost"], f.size, len(data),
                              model.circuit)
         baseline = fit_multistart(FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed,
-                                               prior=prior), good_enough=NOISE_MARGIN * floor["cost"])
+                                               prior=prior, weights=weights), good_enough=NOISE_MARGIN * floor["cost"])
         _log(f"baseline {model.name} fitted: cost {baseline.cost:.4g} in {baseline.wall_s:.1f} s", progress)
     worst = max(float(np.sqrt(np.mean(np.abs(e) ** 2))) for e in baseline.errors.values())
     if worst > MAX_BASELINE_RMS:
@@ -343,6 +361,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                    nominal=model.circuit if model.family != ("lumped",) else None)
     ctx.floor = floor["cost"]
     ctx.prior = prior
+    ctx.weights = weights
+    ctx.resolved = resolved_points(sd)
     if prior is not None:
         moved = ctx.drift(baseline)
         _log(f"design prior: tolerance {prior.tolerance:g}; baseline moved {len(moved)} value(s) beyond it"
@@ -415,15 +435,21 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                         "a split of the design values with its couplings free, and the fit with it stays far above "
                         "the noise")
                 continue
+            if not chosen and best.couplings and best.objective > UNMERGE_ABOVE_FLOOR * floor["cost"]:
+                _refuse(pool, failed, best, new_cause, progress,
+                        f"a first cause with free couplings that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise",
+                        "a new section with its couplings free named first, and the fit with it stays far above "
+                        "the noise (free couplings take the share of a frequency-dependent effect)")
+                continue
             if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
-                    and not missing_modes(f, data, current.predicted)):
+                    and not missing_modes(f, data, current.predicted, ctx.resolved)):
                 _refuse(pool, failed, best, new_cause, progress,
                         "the model without it has every measured resonance and the split does not reach the noise",
                         "no measured resonance missing from the model without it, and the fit with it stays above "
                         "the noise")
                 continue
             try:
-                held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale)
+                held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale, weights=weights)
             except _CANDIDATE_FAILURES:
                 held = -np.inf
             if held < need:
@@ -480,7 +506,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         _log("values beyond the design tolerance in the final model: "
              + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift),
              progress)
-    diag.unexplained = unexplained_bands(f, final.errors, floor["per_response"])
+    diag.unexplained = unexplained_bands(f, {n: e * weights[n] if n in weights else e for n, e in final.errors.items()},
+                                         floor["per_response"])
     diag.evidence = {
         "baseline_model": model.name,
         "localisation": localise(f, data, baseline.errors),
@@ -658,9 +685,9 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
     if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
-                                    or missing_modes(ctx.f, ctx.data, base.predicted) > 0):
+                                    or missing_modes(ctx.f, ctx.data, base.predicted, ctx.resolved) > 0):
         found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
-                                tail, free_couplings=not effects)
+                                tail, free_couplings=not effects, resolved=ctx.resolved)
         if found is not None and (best is None or found[0].objective < best.objective):
             best, um, merged = found
             best.structure = um.candidate.how

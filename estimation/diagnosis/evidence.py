@@ -69,33 +69,70 @@ def localise(f: np.ndarray, measured: Mapping[str, np.ndarray], errors: Mapping[
     return {"region": max(shares, key=lambda k: shares[k]), "shares": shares}
 
 
-def noise_variance(f: np.ndarray, h: np.ndarray) -> float:
+def noise_weights(uncertainty: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per-point residual weights ``u_k`` from each response's standard deviations ``s_k`` of ``ln H``.
+
+    ``u_k^2 = (1/s_k^2) / mean(1/s_k^2)``: inverse-variance weights scaled to a
+    mean of one, so that the weighted cost ``mean_k u_k^2 |e_k|^2`` stays in
+    the units of the unweighted one and each response still counts equally.
+    """
+    out = {}
+    for n, s in uncertainty.items():
+        inv = 1.0 / np.asarray(s, float) ** 2
+        out[n] = np.sqrt(inv / np.mean(inv))
+    return out
+
+
+def noise_variance(f: np.ndarray, h: np.ndarray, sd: np.ndarray | None = None) -> float:
     """Variance ``E|n|^2`` of the complex log noise of one measured response, estimated from the data.
 
     The third difference of ``ln H`` along frequency removes any smooth
     response (quadratic in the index) and leaves ``20`` times the noise
     variance; its median (robust against the few points at sharp resonances)
     over ``ln 2`` gives the mean of the exponentially distributed ``|d|^2``.
+
+    With standard deviations ``sd`` (of ``ln|H|`` per point, from the data
+    file) the noise is not the same at every point: each third difference is
+    divided by its own standard deviation ``sqrt(s_k^2 + 9 s_{k+1}^2 + 9
+    s_{k+2}^2 + s_{k+3}^2)``, which leaves ``2 c^2``, the factor by which the
+    stated variances are off (the data set their shape, the data's roughness
+    their scale); the result is the weighted mean ``mean_k u_k^2 E|n_k|^2``
+    (:func:`noise_weights`), ``2 c^2 / mean(1/s^2)``: the cost a perfect model
+    would still have under the weights.
     """
     y = np.log(np.abs(h)) + 1j * np.unwrap(np.angle(h))
     if y.size < 8:
         return 0.0
     d = y[3:] - 3 * y[2:-1] + 3 * y[1:-2] - y[:-3]
-    return float(np.median(np.abs(d) ** 2) / (20 * np.log(2)))
+    if sd is None:
+        return float(np.median(np.abs(d) ** 2) / (20 * np.log(2)))
+    s2 = np.asarray(sd, float) ** 2
+    scale2 = float(np.median(np.abs(d) ** 2 / (s2[3:] + 9 * s2[2:-1] + 9 * s2[1:-2] + s2[:-3])) / np.log(2))
+    return scale2 / float(np.mean(1.0 / s2))
 
 
-def noise_floor(f: np.ndarray, measured: Mapping[str, np.ndarray]) -> dict[str, object]:
+def noise_floor(f: np.ndarray, measured: Mapping[str, np.ndarray],
+                uncertainty: Mapping[str, np.ndarray] | None = None) -> dict[str, object]:
     """The cost a perfect model would still have: the sum over responses of the noise variances.
+
+    ``uncertainty`` (standard deviations of ``ln H`` per point, for some or all
+    responses) makes the floor that of the weighted cost (:func:`noise_variance`).
 
     Returns
     -------
     dict
         ``cost`` (same units as the diagnosis cost), ``per_response`` noise RMS
-        (complex log units: 0.01 is 1 % / 0.57 deg), ``method``.
+        (complex log units: 0.01 is 1 % / 0.57 deg; weighted where a response
+        has an uncertainty), ``method``.
     """
-    per = {n: noise_variance(f, v) for n, v in measured.items()}
+    unc = dict(uncertainty or {})
+    per = {n: noise_variance(f, v, unc.get(n)) for n, v in measured.items()}
+    method = "median of |third difference of ln H|^2 / (20 ln 2) per response"
+    if unc:
+        method += ("; responses with a stated uncertainty: third differences divided by their own standard "
+                   "deviation, residuals weighted by 1/sd (mean weight one)")
     return {"cost": float(sum(per.values())), "per_response": {n: float(np.sqrt(v)) for n, v in per.items()},
-            "method": "median of |third difference of ln H|^2 / (20 ln 2) per response"}
+            "method": method, "weighted": sorted(unc)}
 
 
 def unexplained_bands(f: np.ndarray, errors: Mapping[str, np.ndarray], noise_rms: Mapping[str, float],

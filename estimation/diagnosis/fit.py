@@ -4,7 +4,9 @@ The residual of response ``r`` at frequency ``f_k`` is the complex log error
 ``e = ln(H_model / H_measured)``: its real part is the log-magnitude error,
 its imaginary part the phase error in radians. Each response is weighted so
 that it counts equally whatever its number of points; the cost is
-``sum_r mean_k |e_rk|^2`` (dimensionless).
+``sum_r mean_k |e_rk|^2`` (dimensionless), or with per-point weights from the
+data's stated uncertainty ``sum_r mean_k u_rk^2 |e_rk|^2`` (``u_rk``
+inverse standard deviations scaled to a mean square of one per response).
 
 Circuit values are fitted in log scale relative to their starting values
 (positive by construction); couplings stay at their starting values, which
@@ -198,6 +200,9 @@ class FrequencyFit:
     couplings : sequence of str
         K elements (numeric values) fitted too, as ``ln((1 - k) / (1 - k_0))``
         (the others stay at their values).
+    weights : mapping, optional
+        Response name to per-point weights ``u_k`` (:func:`.evidence.noise_weights`):
+        the residuals, the cost and the residual sum are those of ``u_k e_k``.
     """
 
     def __init__(
@@ -211,6 +216,7 @@ class FrequencyFit:
         scale: float = 1.0,
         prior: DesignPrior | None = None,
         couplings: Sequence[str] = (),
+        weights: Mapping[str, np.ndarray] | None = None,
     ):
         self.effects = list(effects)
         self.configurations = list(configurations)
@@ -224,6 +230,7 @@ class FrequencyFit:
         self.f = np.asarray(frequency_hz, float)
         self.s = 2j * np.pi * self.f
         self.measured = dict(measured)
+        self.weights = {n: np.asarray(w, float) for n, w in (weights or {}).items() if n in self.measured}
         self.branches: list[str] = []
         for e in self.effects:
             for b in e.branches(self.circuit, self.groups):
@@ -400,6 +407,8 @@ class FrequencyFit:
                 e = np.log(pred[n] / meas)
                 if self._kernel is not None:
                     e = np.where(np.isfinite(e), e, 0) @ self._kernel
+                if n in self.weights:
+                    e = e * self.weights[n]
                 parts.append(np.concatenate([e.real, e.imag], axis=1) / np.sqrt(2 * meas.size))
         if self._pidx.size:
             parts.append(self.prior_residuals(X))
@@ -680,8 +689,9 @@ class FrequencyFit:
         pred = self.predict(x)
         err = self.errors(pred)
         err = {k: np.where(np.isfinite(v), v, 1e3) for k, v in err.items()}
-        cost = float(sum(np.mean(np.abs(v) ** 2) for v in err.values()))
-        rss = float(sum(np.sum(np.abs(v) ** 2) for v in err.values()))
+        u2 = {k: self.weights[k] ** 2 if k in self.weights else 1.0 for k in err}
+        cost = float(sum(np.mean(u2[k] * np.abs(v) ** 2) for k, v in err.items()))
+        rss = float(sum(np.sum(u2[k] * np.abs(v) ** 2) for k, v in err.items()))
         n_res = int(sum(2 * v.size for v in err.values()))
         params = self.extra_values(x)
         causes = [e.cause for e in self.effects]

@@ -22,22 +22,24 @@ from .fit import FitResult, FrequencyFit
 
 
 def _refit_score(r: FitResult, configs: Sequence[Configuration], f: np.ndarray, data: Mapping[str, np.ndarray],
-                 fixed: Sequence[str], scale: float, train: np.ndarray, test: np.ndarray, max_nfev: int) -> float:
+                 fixed: Sequence[str], scale: float, train: np.ndarray, test: np.ndarray, max_nfev: int,
+                 weights: Mapping[str, np.ndarray] | None = None) -> float:
+    w = dict(weights or {})
     circuit = r.fitted_circuit()
     nc = r.x.size - sum(len(e.parameters) for e in r.effects)
     tail = r.x[nc:]
     fit = FrequencyFit(circuit, configs, f[train], {k: v[train] for k, v in data.items()}, fixed, r.effects, scale,
-                       couplings=r.couplings)
+                       couplings=r.couplings, weights={k: v[train] for k, v in w.items()})
     x0 = np.concatenate([np.zeros(fit.nc), tail])
     res = fit.fit(x0s=x0[None], grid=False, max_nfev=max_nfev, tol=1e-7)
     held = FrequencyFit(circuit, configs, f[test], {k: v[test] for k, v in data.items()}, fixed, r.effects, scale,
-                        couplings=r.couplings)
+                        couplings=r.couplings, weights={k: v[test] for k, v in w.items()})
     return held.result(res.x).cost
 
 
 def held_out_gain(before: FitResult, after: FitResult, configs: Sequence[Configuration], f: np.ndarray,
                   data: Mapping[str, np.ndarray], fixed: Sequence[str] = (), scale: float = 1.0,
-                  max_nfev: int = 15) -> float:
+                  max_nfev: int = 15, weights: Mapping[str, np.ndarray] | None = None) -> float:
     """Fraction of the held-out cost of ``before`` that ``after`` removes (two folds: even and odd points).
 
     Parameters
@@ -54,6 +56,8 @@ def held_out_gain(before: FitResult, after: FitResult, configs: Sequence[Configu
         Typical impedance of the data.
     max_nfev : int
         Evaluations of each refit on half the points.
+    weights : mapping, optional
+        Per-point residual weights by response (:func:`.evidence.noise_weights`).
 
     Returns
     -------
@@ -65,6 +69,6 @@ def held_out_gain(before: FitResult, after: FitResult, configs: Sequence[Configu
     folds = [(idx % 2 == 0, idx % 2 == 1), (idx % 2 == 1, idx % 2 == 0)]
     cost_b = cost_a = 0.0
     for train, test in folds:
-        cost_b += _refit_score(before, configs, f, data, fixed, scale, train, test, max_nfev)
-        cost_a += _refit_score(after, configs, f, data, fixed, scale, train, test, max_nfev)
+        cost_b += _refit_score(before, configs, f, data, fixed, scale, train, test, max_nfev, weights)
+        cost_a += _refit_score(after, configs, f, data, fixed, scale, train, test, max_nfev, weights)
     return float(1 - cost_a / cost_b) if cost_b > 0 else 0.0

@@ -53,6 +53,14 @@ from .sections import (Chain, SectionCandidate, _make_pd, _unique, coupling_deca
 MODE_TOLERANCE = 0.04
 #: Resonances smaller than this (dB) are not counted.
 MIN_PROMINENCE_DB = 1.0
+#: A measured point counts for resonances only if its stated standard deviation of ln H is under a third of
+#: the prominence a resonance needs (noisier points make peaks and dips of their own).
+MAX_RESONANCE_SD = MIN_PROMINENCE_DB * np.log(10) / 20 / 3
+
+
+def resolved_points(uncertainty: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per response with a stated uncertainty: the points quiet enough to show resonances (``MAX_RESONANCE_SD``)."""
+    return {n: np.asarray(s, float) <= MAX_RESONANCE_SD for n, s in uncertainty.items()}
 
 
 def _resonances(f: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -60,7 +68,8 @@ def _resonances(f: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.array([x.frequency_hz for x in r]), np.array([x.kind == "parallel" for x in r], bool)
 
 
-def missing_modes(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: Mapping[str, np.ndarray]) -> int:
+def missing_modes(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: Mapping[str, np.ndarray],
+                  resolved: Mapping[str, np.ndarray] | None = None) -> int:
     """Measured impedance resonances (peaks and dips) that the model's responses do not reproduce.
 
     Parameters
@@ -68,6 +77,8 @@ def missing_modes(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: 
     f : numpy.ndarray, Hz
     measured, predicted : mapping
         Response name to complex values; only impedances (``Z...``) count.
+    resolved : mapping, optional
+        Response name to the points that count (:func:`resolved_points`); default all.
 
     Returns
     -------
@@ -77,34 +88,41 @@ def missing_modes(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: 
         resonance of the same kind within :data:`MODE_TOLERANCE`.
     """
     worst = 0
-    for a, b in _paired_resonances(f, measured, predicted):
+    for a, b in _paired_resonances(f, measured, predicted, resolved):
         unmatched = sum(1 for x in a if not b.size or np.min(np.abs(b / x - 1)) > MODE_TOLERANCE)
         worst = max(worst, a.size - b.size, unmatched if a.size > b.size else 0)
     return worst
 
 
-def _paired_resonances(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: Mapping[str, np.ndarray]
-                       ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """Per impedance (``Z...``) and kind (peak, dip): measured and model resonance frequencies, Hz."""
+def _paired_resonances(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: Mapping[str, np.ndarray],
+                       resolved: Mapping[str, np.ndarray] | None = None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Per impedance (``Z...``) and kind (peak, dip): measured and model resonance frequencies, Hz (on the
+    ``resolved`` points of each response only, when given)."""
     for name, h in measured.items():
         if not name.startswith("Z") or name not in predicted:
             continue
-        fm, pm = _resonances(f, h)
-        fp, pp = _resonances(f, predicted[name])
+        keep = (resolved or {}).get(name)
+        keep = np.ones(f.size, bool) if keep is None else keep
+        if np.count_nonzero(keep) < 3:
+            continue
+        fm, pm = _resonances(f[keep], h[keep])
+        fp, pp = _resonances(f[keep], predicted[name][keep])
         for kind in (True, False):
             yield fm[pm == kind], fp[pp == kind]
 
 
-def resonance_score(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: Mapping[str, np.ndarray]) -> float:
+def resonance_score(f: np.ndarray, measured: Mapping[str, np.ndarray], predicted: Mapping[str, np.ndarray],
+                    resolved: Mapping[str, np.ndarray] | None = None) -> float:
     """Distance between measured and model resonances (0: every one matched), summed over the impedances.
 
     Each measured resonance adds the log distance to the nearest model
     resonance of its kind, each model resonance half its distance to the
-    nearest measured one; distances are capped at ``ln 1.5``.
+    nearest measured one; distances are capped at ``ln 1.5``. ``resolved``:
+    as for :func:`missing_modes`.
     """
     cap = float(np.log(1.5))
     score = 0.0
-    for a, b in _paired_resonances(f, measured, predicted):
+    for a, b in _paired_resonances(f, measured, predicted, resolved):
         for x in a:
             score += min(cap, float(np.min(np.abs(np.log(b / x))))) if b.size else cap
         for x in b:
@@ -315,7 +333,8 @@ def unmerged_candidates(nominal: Circuit, ports: Sequence[str]) -> list[Unmerged
 
 def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np.ndarray], nominal: Circuit,
                     ports: Sequence[str], tail: np.ndarray, by_resonance: int = 2, by_cost: int = 0,
-                    screen_nfev: int = 15, max_nfev: int = 80, coupling_nfev: int = 60, free_couplings: bool = True):
+                    screen_nfev: int = 15, max_nfev: int = 80, coupling_nfev: int = 60, free_couplings: bool = True,
+                    resolved: Mapping[str, np.ndarray] | None = None):
     """Fit every un-merged candidate from its best seeds; the best fit, its candidate and the fit to merge back.
 
     The seeds are fitted with the couplings as designed (the baseline's
@@ -344,6 +363,8 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         of the best, and of its fit with the couplings free.
     free_couplings : bool
         Refit the best with the couplings the split touches free.
+    resolved : mapping, optional
+        Points that count for resonances, by response (:func:`resolved_points`).
 
     Returns
     -------
@@ -363,7 +384,8 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
             continue
         cost = np.sum(r * r, axis=1)
-        score = np.array([resonance_score(f, measured, {k: v[i] for k, v in pred.items()}) for i in range(len(rows))])
+        score = np.array([resonance_score(f, measured, {k: v[i] for k, v in pred.items()}, resolved)
+                          for i in range(len(rows))])
         pick = list(np.lexsort((cost, score))[:by_resonance])
         pick += [i for i in np.argsort(cost) if i not in pick][:by_cost]
         for i in pick:

@@ -29,6 +29,7 @@ import numpy as np
 
 from pris_cosim.measured import Waveforms
 from pris_cosim.spectral import estimate_response
+from pris_cosim.spectral_uncertainty import NULL_WIDTH, clock_null_mask
 
 from .fit import DiagnosisError
 
@@ -36,8 +37,7 @@ from .fit import DiagnosisError
 MIN_COHERENCE = 0.9
 #: ... and current power at least this fraction of its median over the band (both paths).
 MIN_POWER_FRACTION = 0.05
-#: Bins within this fraction of a clock multiple are left out (the PRBS spectrum's nulls).
-NULL_WIDTH = 0.08
+# Bins within NULL_WIDTH (8 %) of a clock multiple are left out (the PRBS spectrum's nulls): clock_null_mask.
 #: Highest frequency used: this fraction of the sampling rate (the record's sampling and any interpolation
 #: distort above) ...
 MAX_FS_FRACTION = 0.1
@@ -102,9 +102,7 @@ def winding_impedance(w: Waveforms, points: int = POINTS) -> tuple[np.ndarray, n
         method = "Welch H1 (Hann, 8 segments), bins with coherence >= 0.9"
     edges = np.flatnonzero(np.diff(u))
     if edges.size > 2:  # the PRBS spectrum's nulls at the clock's multiples carry no excitation
-        fclk = fs / float(np.min(np.diff(edges)))
-        near = np.abs(f / fclk - np.round(f / fclk))
-        good &= ~((near < NULL_WIDTH) & (np.round(f / fclk) >= 1))
+        good &= ~clock_null_mask(f, fs / float(np.min(np.diff(edges))), NULL_WIDTH)
     good &= f <= min(MAX_FS_FRACTION * fs, MAX_CLOCK_MULTIPLE * fs / max(float(np.min(np.diff(edges))), 1.0)
                      if edges.size > 2 else MAX_FS_FRACTION * fs)
     if np.count_nonzero(good) < 20:
