@@ -37,7 +37,10 @@ def test_missing_section_named_against_the_design():
     assert case.truth["sections"] == 7
     assert d.causes == ["missing-section"], d.steps
     assert d.drift == [], d.drift
-    assert d.gain > 0.3
+    # the baseline reaches the noise only with values beyond the tolerance: the section brings it there within it
+    assert d.baseline_drift, "the baseline alone needs values far from the design"
+    assert d.best.cost <= 1.25 * d.noise["cost"]
+    assert d.gain > 0.1
 
 
 @pytest.mark.slow

@@ -48,9 +48,8 @@ from .prior import DesignPrior
 
 
 #: Jacobian columns of the circuit values analytic (:meth:`FrequencyFit.circuit_jacobian`, about half the time of a
-#: diagnosis); False: forward differences of step 1e-6, as the effects' columns. Off by default: some diagnoses sit
-#: on the edge of the naming rules, where the rounding of the differences decides (docs/diagnosis-design.md).
-ANALYTIC_JACOBIAN = False
+#: diagnosis); False: forward differences of step 1e-6, as the effects' columns.
+ANALYTIC_JACOBIAN = True
 
 #: Smoothing widths (decades of frequency) of a continued fit (:meth:`FrequencyFit.fit_continued`).
 CONTINUATION = (0.1, 0.03, 0.01)

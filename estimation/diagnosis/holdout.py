@@ -2,9 +2,10 @@
 
 A structure with many new values (a missing section adds four or five) can
 lower the cost by following the noise. Both the model before the extension
-and the extended one are refitted (from their fitted values, a few
-iterations) on every other frequency point and scored on the points left
-out, and the other way round; the held-out gain is
+and the extended one are refitted (from their fitted values, to
+convergence, with the design prior of the full fits, its weight scaled to
+the half of the points) on every other frequency point and scored on the
+points left out, and the other way round; the held-out gain is
 ``1 - sum(test cost extended) / sum(test cost before)``. Noise followed on the
 fitting points does not carry over to the held-out ones, so the gain of an
 extension that only fits noise falls to about zero or below.
@@ -13,23 +14,27 @@ extension that only fits noise falls to about zero or below.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 
 from pris_cosim.models import Configuration
 
 from .fit import FitResult, FrequencyFit
+from .prior import DesignPrior
 
 
 def _refit_score(r: FitResult, configs: Sequence[Configuration], f: np.ndarray, data: Mapping[str, np.ndarray],
                  fixed: Sequence[str], scale: float, train: np.ndarray, test: np.ndarray, max_nfev: int,
-                 weights: Mapping[str, np.ndarray] | None = None) -> float:
+                 weights: Mapping[str, np.ndarray] | None = None, prior: DesignPrior | None = None) -> float:
     w = dict(weights or {})
     circuit = r.fitted_circuit()
     nc = r.x.size - sum(len(e.parameters) for e in r.effects)
     tail = r.x[nc:]
+    if prior is not None:  # the prior of the whole record, weighed against half its points
+        prior = replace(prior, weight=prior.weight * f.size / int(np.sum(train)))
     fit = FrequencyFit(circuit, configs, f[train], {k: v[train] for k, v in data.items()}, fixed, r.effects, scale,
-                       couplings=r.couplings, weights={k: v[train] for k, v in w.items()})
+                       prior=prior, couplings=r.couplings, weights={k: v[train] for k, v in w.items()})
     x0 = np.concatenate([np.zeros(fit.nc), tail])
     res = fit.fit(x0s=x0[None], grid=False, max_nfev=max_nfev, tol=1e-7)
     held = FrequencyFit(circuit, configs, f[test], {k: v[test] for k, v in data.items()}, fixed, r.effects, scale,
@@ -39,7 +44,8 @@ def _refit_score(r: FitResult, configs: Sequence[Configuration], f: np.ndarray, 
 
 def held_out_gain(before: FitResult, after: FitResult, configs: Sequence[Configuration], f: np.ndarray,
                   data: Mapping[str, np.ndarray], fixed: Sequence[str] = (), scale: float = 1.0,
-                  max_nfev: int = 15, weights: Mapping[str, np.ndarray] | None = None) -> float:
+                  max_nfev: int = 15, weights: Mapping[str, np.ndarray] | None = None,
+                  prior: DesignPrior | None = None) -> float:
     """Fraction of the held-out cost of ``before`` that ``after`` removes (two folds: even and odd points).
 
     Parameters
@@ -58,6 +64,9 @@ def held_out_gain(before: FitResult, after: FitResult, configs: Sequence[Configu
         Evaluations of each refit on half the points.
     weights : mapping, optional
         Per-point residual weights by response (:func:`.evidence.noise_weights`).
+    prior : DesignPrior, optional
+        The design prior of the full fits (:mod:`.prior`); the refits carry it,
+        its weight multiplied by the ratio of all points to fitted points.
 
     Returns
     -------
@@ -69,6 +78,6 @@ def held_out_gain(before: FitResult, after: FitResult, configs: Sequence[Configu
     folds = [(idx % 2 == 0, idx % 2 == 1), (idx % 2 == 1, idx % 2 == 0)]
     cost_b = cost_a = 0.0
     for train, test in folds:
-        cost_b += _refit_score(before, configs, f, data, fixed, scale, train, test, max_nfev, weights)
-        cost_a += _refit_score(after, configs, f, data, fixed, scale, train, test, max_nfev, weights)
+        cost_b += _refit_score(before, configs, f, data, fixed, scale, train, test, max_nfev, weights, prior)
+        cost_a += _refit_score(after, configs, f, data, fixed, scale, train, test, max_nfev, weights, prior)
     return float(1 - cost_a / cost_b) if cost_b > 0 else 0.0
