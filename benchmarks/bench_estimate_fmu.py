@@ -281,7 +281,8 @@ def ladder_peers(a: argparse.Namespace, d: Path, truth: dict[str, float], out: P
                                                    "target met"],
               [[r, s["ratio_window_runs"], s["ratio_record_equivalents"], str(s["target_met"])]
                for r, s in summary.items()])],
-        summary=f"pris-cosim estimate and estim8 (scipy DE + L-BFGS-B, one process, wall cap {a.peer_wall:g} s) on the "
+        summary=f"pris-cosim estimate and estim8 (scipy DE + L-BFGS-B, one process, wall cap "
+                f"{max(float(s['peer'].get('wall_cap_s', a.peer_wall)) for s in summary.values()):g} s) on the "
                 f"same foreign FMU and record; 1-minute load average during the runs {min(loads):.1f}..{max(loads):.1f} "
                 "on a shared 2-core machine")
     return 0
@@ -319,7 +320,7 @@ def ladder(a: argparse.Namespace, out: Path) -> int:
                "whole-record equivalents", "wall (s)", "converged", "non-identifiable"], rows),
         table("Per-parameter errors", ["record", "parameter", "truth", "estimate", "error (%)", "1-sigma (%)"],
               errs_rows)],
-        summary="pris-cosim estimate with a foreign (pythonfmu) FMU in the loop: the shared three-section ladder, "
+        summary="pris-cosim estimate with a foreign (pythonfmu) FMU in the loop: a three-section ladder, "
                 "noise-free and 0.5 % noise records; wall times on a shared, loaded 2-core machine")
     return 0
 
