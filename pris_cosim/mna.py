@@ -81,15 +81,7 @@ class MNA:
         index = {n: i for i, n in enumerate(self.nodes)}
         self._index = index
 
-        def incidence(elements: Sequence) -> np.ndarray:
-            a = np.zeros((N, len(elements)))
-            for j, e in enumerate(elements):
-                if e.nodes[0] != GROUND:
-                    a[index[e.nodes[0]], j] += 1.0
-                if e.nodes[1] != GROUND:
-                    a[index[e.nodes[1]], j] -= 1.0
-            return a
-
+        incidence = self.incidence
         self.resistors = circuit.of_kind("R")
         self.capacitors = circuit.of_kind("C")
         self.inductors = circuit.inductors()
@@ -128,6 +120,17 @@ class MNA:
         self.outputs = [f"v({n})" for n in self.nodes] + [f"i({v.name})" for v in self.vsources]
 
     # ------------------------------------------------------------------ structure
+
+    def incidence(self, elements: Sequence) -> np.ndarray:
+        """Node-branch incidence matrix ``(nodes, elements)``: +1 at each element's first node, -1 at its second
+        (ground has no row)."""
+        a = np.zeros((len(self.nodes), len(elements)))
+        for j, e in enumerate(elements):
+            if e.nodes[0] != GROUND:
+                a[self._index[e.nodes[0]], j] += 1.0
+            if e.nodes[1] != GROUND:
+                a[self._index[e.nodes[1]], j] -= 1.0
+        return a
     def _bases(self) -> None:
         N = len(self.nodes)
         groups = components_without_ground([e.nodes for e in self.capacitors], self.nodes)

@@ -246,15 +246,7 @@ class ProbedConfiguration:
             N, m, q = len(mna.nodes), len(mna.inductors), len(mna.vsources)
             index = {n: i for i, n in enumerate(mna.nodes)}
 
-            def incidence(elements) -> np.ndarray:
-                a = np.zeros((N, len(elements)))
-                for j, e in enumerate(elements):
-                    if e.nodes[0] != GROUND:
-                        a[index[e.nodes[0]], j] += 1.0
-                    if e.nodes[1] != GROUND:
-                        a[index[e.nodes[1]], j] -= 1.0
-                return a
-
+            incidence = mna.incidence
             ind = {e.key: i for i, e in enumerate(mna.inductors)}
             sources = {v.key: i for i, v in enumerate(mna.vsources)}
             sign = np.ones(N + m + q)
