@@ -35,8 +35,8 @@ def _responses(net: rs.Net, kind: str, f: np.ndarray) -> dict[str, np.ndarray]:
     return rs.two_winding_responses(net, f)
 
 
-def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target: str = "sections"
-                      ) -> dict[str, float]:
+def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target: str = "sections",
+                      bound: float = float(np.log(100.0)), free: tuple[str, ...] = ()) -> dict[str, float]:
     """Fit of the baseline's structure to the truth (no noise).
 
     Parameters
@@ -51,6 +51,12 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
         ``sections``: the truth's sections without its other effects (is a
         missing section detectable); ``truth``: the truth with every effect
         (is a frequency-dependent effect detectable).
+    bound : float
+        Largest ``|ln(value / baseline value)|`` of the fit (a design case:
+        the values within twice the design tolerance, beyond which the
+        diagnosis counts a fit as drift, not as an explanation).
+    free : tuple of str
+        Elements exempt from ``bound`` (a design case's drifted value).
 
     Returns
     -------
@@ -77,6 +83,8 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
         r = np.concatenate([np.concatenate([v.real, v.imag]) / np.sqrt(2 * v.size) for v in e.values()])
         return np.where(np.isfinite(r), r, 1e3)
 
+    big = float(np.log(100.0))
+    hi = np.array([big if n.lower() in {x.lower() for x in free} else bound for n in names])
     best = np.inf
     zero = np.zeros(len(names))
     starts = [(case.nets["merged"], zero)]
@@ -85,7 +93,7 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
     rng = np.random.default_rng(7)
     starts += [(case.nets["merged"], 0.4 * rng.standard_normal(len(names))) for _ in range(random_starts)]
     for start, x0 in starts:
-        sol = least_squares(residuals, x0, args=(start,), bounds=(-np.log(100), np.log(100)),
+        sol = least_squares(residuals, np.clip(x0, -0.999 * hi, 0.999 * hi), args=(start,), bounds=(-hi, hi),
                             max_nfev=max_nfev, x_scale="jac")
         e = errors(start, sol.x)
         best = min(best, max(float(np.mean(np.abs(v) ** 2)) for v in e.values()))

@@ -25,8 +25,11 @@ only, ``hv`` only, ``all``).
 ``magnetising-inductance``
     thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = f_ref^b``: ``a`` and
     ``L_linear`` are not separable, so ``L(f_ref) = L_linear``); causal:
-    ``L (j f/f_ref)^(-b)``. Applied to the winding inductances with their
-    mutuals (``M_ij`` scales with ``sqrt(L_i L_j)``).
+    ``L (j f/f_ref)^(-b)``; relaxation (the core's permeability dispersing
+    above a corner, Davidson-Cole): ``L [1 - d + d (1 + j f/f_c)^(-b)]``,
+    ``L`` below the corner, ``L (1 - d)`` far above it. Applied to the
+    winding inductances with their mutuals (``M_ij`` scales with
+    ``sqrt(L_i L_j)``).
 ``stray-capacitance``
     one-port data: a lossy fixture capacitance across the port, the causal
     constant-phase admittance ``Y = w0 C (j f/f0)^alpha`` (``alpha = 1`` an
@@ -372,6 +375,14 @@ class MagnetisingInductance(Effect):
     def __post_init__(self) -> None:
         self.cause = "magnetising-inductance"
         self.thesis_eq = "2.5"
+        if self.form == "relaxation":  # Davidson-Cole dispersion of the core's permeability
+            lo, hi = _corner_range(self)
+            self.parameters = [
+                ExtraParameter("d", 1e-3, 0.95, (0.05, 0.3), description="fall of L above the corner (x L)"),
+                ExtraParameter("b", 0.2, 1.0, (0.5,), log=False, description="spread exponent"),
+                ExtraParameter("fc", lo, hi, _corner_starts(self), description="corner frequency, Hz"),
+            ]
+            return
         lo = 0.0 if self.form == "thesis" else 1e-4
         self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
                                           description="b_Lo: exponent")]
@@ -395,6 +406,9 @@ class MagnetisingInductance(Effect):
         if self.form == "thesis":
             b = _p(p, "b")
             return magnetising_inductance(f[None, :], 1.0, self.f_ref ** b, b).astype(complex)
+        if self.form == "relaxation":
+            d = _p(p, "d")
+            return 1 - d + d * (1 + 1j * f[None, :] / _p(p, "fc")) ** (-_p(p, "b"))
         return (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
 
     def branch_changes(self, circuit, groups, values, f, p):
@@ -417,6 +431,9 @@ class MagnetisingInductance(Effect):
         if self.form == "thesis":
             return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
                     f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
+        if self.form == "relaxation":
+            return (f"L(f) = L [1 - d + d (1 + j f/f_c)^(-b)] (Davidson-Cole), d = {p['d']:.4g}, b = {p['b']:.4g}, "
+                    f"f_c = {p['fc']:.4g} Hz")
         return f"Z_L(f) = j w L (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}"
 
     def realise(self, circuit, groups, p, fmin, fmax):
@@ -542,7 +559,7 @@ def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, 
     for form in ("thesis", "causal", "relaxation"):
         if cause == "skin-effect":
             out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
-        elif cause == "magnetising-inductance" and form != "relaxation":
+        elif cause == "magnetising-inductance":
             out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
             if form == "thesis" and "core" in groups.inductors:  # the core loop's own inductance, lossless (2.5)
                 out.append(MagnetisingInductance(form=form, group="core", f_ref=f_ref, f_max=f_max))
