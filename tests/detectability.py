@@ -30,7 +30,7 @@ import refsolver as rs
 
 
 def _responses(net: rs.Net, kind: str, f: np.ndarray) -> dict[str, np.ndarray]:
-    if kind == "one-port":
+    if kind in ("one-port", "design"):
         return {"Zin": rs.impedance(net, "n1", f)}
     return rs.two_winding_responses(net, f)
 

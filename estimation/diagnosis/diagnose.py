@@ -623,10 +623,7 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
         for eff in variants:
             try:
                 fit = ctx.fit(start, [eff])
-                # from the fitted baseline the effect alone first; from the design every value with it (the design
-                # values are off the data's resonances, so the effect alone tells nothing there)
-                pre = fit.fit([_effect_starts(ctx, fit, eff)], circuit_free=bool(pools),
-                              max_nfev=NOMINAL_SCREEN_NFEV if pools else 40, keep_starts=2)
+                pre = fit.fit([_effect_starts(ctx, fit, eff)], circuit_free=False, max_nfev=40, keep_starts=2)
             except _CANDIDATE_FAILURES:
                 continue
             screened.append((pre.cost, eff, fit, pre))
@@ -637,7 +634,7 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
                 break  # a clearly worse variant is not refined
             try:
                 res = fit.fit([_effect_starts(ctx, fit, eff)], x0s=pre.x[None], keep_starts=1, must_beat=must_beat,
-                              max_nfev=50 if len(pools) == 1 else 60, tol=1e-6)
+                              max_nfev=50 if len(pools) == 1 else 30, tol=1e-6)
             except _CANDIDATE_FAILURES:
                 continue
             if best is None or res.objective < best.objective:
@@ -798,10 +795,11 @@ def _single_causes(ctx: _Context, todo: Sequence[str], baseline: FitResult, prog
         else:
             # once a cause explains the data to the noise, the others are fitted from the fitted baseline only
             explained = any(ctx.explained(r) for r in results.values())
-            # the design values are a start too: a fitted baseline absorbs an effect within the tolerance as well
-            # (a skin effect's damping taken by resistances a few per cent off), and a fit of the effect from
-            # there can stall where the same fit from the design reaches the noise
-            res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.objective, from_nominal=not explained)
+            # with a design prior, a baseline whose values all stay within GROSS_DRIFT tolerances has absorbed
+            # nothing: the design values add no start
+            distorted = ctx.prior is None or any(d["sigmas"] > GROSS_DRIFT for d in ctx.drift(baseline))
+            res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.objective,
+                                       from_nominal=distorted and not explained)
             variants_tried[cause] = variants
         if res is None:
             continue
