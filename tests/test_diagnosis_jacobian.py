@@ -53,6 +53,7 @@ def _one_port_effects(f: np.ndarray, scale: float) -> list:
         [cat.SkinEffect(form="relaxation", f_ref=f[0], f_max=f[-1])],
         [cat.CoreLoss(form="causal", f_ref=f[0])],
         [cat.MagnetisingInductance(form="causal", f_ref=f[0])],
+        [cat.MagnetisingInductance(form="relaxation", f_ref=f[0], f_max=f[-1])],
         [cat.StrayCapacitance(form="causal", group="port", f_ref=f[-1], c_scale=1 / (w * scale))],
         [cat.LeadInductance(form="causal", group="port", f_ref=f[-1], l_scale=scale / w, r_scale=scale)],
         [cat.SkinEffect(form="causal", f_ref=f[0]), cat.CoreLoss(form="thesis", f_ref=f[0]),
@@ -60,7 +61,7 @@ def _one_port_effects(f: np.ndarray, scale: float) -> list:
     ]
 
 
-@pytest.mark.parametrize("which", range(9))
+@pytest.mark.parametrize("which", range(10))
 def test_one_port_circuit_columns_match_central_differences(which):
     circuit, cfg, f, data = _one_port()
     scale = float(np.median(np.abs(data["Zin"])))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from estimation.diagnosis import diagnose_frequency
-from estimation.diagnosis.catalogue import SkinEffect, winding_groups
+from estimation.diagnosis.catalogue import MagnetisingInductance, SkinEffect, winding_groups
 from pris_cosim.frf import Response, ResponseModel
 from pris_cosim.netlist import parse_netlist
 
@@ -67,5 +67,20 @@ def test_skin_relaxation_form_is_realised_by_a_passive_ladder():
     f = np.logspace(3, 7, 60)
     z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
     want = 2.0 * (1 + p["a"] * ((1 + 1j * f / p["fc"]) ** p["b"] - 1)) + 2j * np.pi * f * 100e-6
+    err = np.log(z / want)
+    assert np.max(np.abs(err.real)) * 20 / np.log(10) < 0.1 and np.degrees(np.max(np.abs(err.imag))) < 1.0
+
+
+def test_magnetising_relaxation_form_is_realised_by_a_passive_ladder():
+    """The realised inductor's impedance against ``j w L [1 - d + d (1 + j f/f_c)^(-b)] + R`` written out here."""
+    net = parse_netlist("* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n")
+    groups = winding_groups(net, ["n1"])
+    eff = MagnetisingInductance(form="relaxation", f_ref=1e3, f_max=1e7)
+    p = {"d": 0.4, "b": 0.7, "fc": 2e5}
+    realised, _ = eff.realise(net, groups, p, 1e3, 1e7)
+    assert all(e.value > 0 for e in realised.elements if e.kind in "RL")
+    f = np.logspace(3, 7, 60)
+    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
+    want = 2.0 + 2j * np.pi * f * 10e-3 * (1 - p["d"] + p["d"] * (1 + 1j * f / p["fc"]) ** (-p["b"]))
     err = np.log(z / want)
     assert np.max(np.abs(err.real)) * 20 / np.log(10) < 0.1 and np.degrees(np.max(np.abs(err.imag))) < 1.0
