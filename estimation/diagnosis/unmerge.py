@@ -334,7 +334,7 @@ def unmerged_candidates(nominal: Circuit, ports: Sequence[str]) -> list[Unmerged
 def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np.ndarray], nominal: Circuit,
                     ports: Sequence[str], tail: np.ndarray, by_resonance: int = 2, by_cost: int = 0,
                     screen_nfev: int = 15, max_nfev: int = 80, coupling_nfev: int = 60, free_couplings: bool = True,
-                    resolved: Mapping[str, np.ndarray] | None = None):
+                    resolved: Mapping[str, np.ndarray] | None = None, all_seeds: bool = True, seed_nfev: int = 8):
     """Fit every un-merged candidate from its best seeds; the best fit, its candidate and the fit to merge back.
 
     The seeds are fitted with the couplings as designed (the baseline's
@@ -361,6 +361,11 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
     screen_nfev, max_nfev, coupling_nfev : int
         Evaluations of the short fits of every seed kept, of the final fit
         of the best, and of its fit with the couplings free.
+    all_seeds : bool
+        Fit every seed (not only those picked by resonance and cost), each
+        continued through smoothed errors (:meth:`.fit.FrequencyFit.fit_continued`,
+        ``seed_nfev`` evaluations per stage); the best ``by_resonance + by_cost``
+        of each candidate go on.
     free_couplings : bool
         Refit the best with the couplings the split touches free.
     resolved : mapping, optional
@@ -388,12 +393,17 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
                           for i in range(len(rows))])
         pick = list(np.lexsort((cost, score))[:by_resonance])
         pick += [i for i in np.argsort(cost) if i not in pick][:by_cost]
+        if all_seeds:  # which seed leads to the measured resonances shows only once it is fitted
+            pick += [i for i in range(len(rows)) if i not in pick]
+        fitted = []
         for i in pick:
             try:
-                res = fit.fit(x0s=rows[i][None], grid=False, max_nfev=screen_nfev, tol=1e-6)
+                # continued through smoothed errors: the seeds' resonances are tens of per cent off the measured ones
+                res = fit.fit_continued(rows[i], stage_nfev=seed_nfev, max_nfev=seed_nfev, tol=1e-6)
             except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
                 continue
-            screened.append((res.cost, um, fit, res))
+            fitted.append((res.objective, um, fit, res))
+        screened += sorted(fitted, key=lambda t: t[0])[:by_resonance + by_cost]
     if not screened:
         return None
     screened.sort(key=lambda t: t[0])
