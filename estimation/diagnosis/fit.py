@@ -51,10 +51,12 @@ from .prior import DesignPrior
 #: diagnosis); False: forward differences of step 1e-6, as the effects' columns.
 ANALYTIC_JACOBIAN = True
 
-#: Smoothing widths (decades of frequency) of a continued fit (:meth:`FrequencyFit.fit_continued`): from a
-#: decade, so that resonances 10-20 % off their measured places are first drawn together by their broad shape (a
-#: schedule starting at 0.1 decade leaves a design 20 % off in a poor optimum hundreds of times above the noise).
-CONTINUATION = (1.0, 0.5, 0.25, 0.1, 0.05)
+#: Smoothing widths (decades of frequency) of a continued fit (:meth:`FrequencyFit.fit_continued`): the baseline's,
+#: whose resonances are a few per cent off the measured ones.
+CONTINUATION = (0.1, 0.03, 0.01)
+#: ... and from a decade, for starts whose resonances are 10-20 % off (the seeds of a new section): their broad shape
+#: is drawn together first (a schedule starting at 0.1 decade leaves such a start hundreds of times above the noise).
+WIDE_CONTINUATION = (1.0, 0.5, 0.25, 0.1, 0.05)
 
 
 class DiagnosisError(ValueError):
@@ -658,7 +660,8 @@ class FrequencyFit:
         return self.result(best_x, cause, nfev, time.perf_counter() - t0)
 
     def fit_continued(self, x0: np.ndarray, stages: Sequence[float] = CONTINUATION, stage_nfev: int = 30,
-                      max_nfev: int = 100, circuit_free: bool = True, tol: float = 1e-8) -> FitResult:
+                      max_nfev: int = 100, circuit_free: bool = True, tol: float = 1e-8,
+                      prior_in_stages: bool = True) -> FitResult:
         """A local fit from ``x0`` through errors smoothed less and less (:meth:`smooth`), then the raw errors.
 
         Parameters
@@ -669,15 +672,19 @@ class FrequencyFit:
             Smoothing widths, decades, widest first.
         stage_nfev, max_nfev : int
             Evaluations per smoothed stage and of the final fit.
+        prior_in_stages : bool
+            Keep the design prior in the smoothed stages. Without it they
+            align the resonances with the data alone: smoothed errors are
+            small while a resonance is still far off, and against them the
+            prior holds the values where they started.
         """
         t0 = time.perf_counter()
         x = np.asarray(x0, float)
         nfev = 0
         pscale = self._pscale
         try:
-            # the smoothed stages align the resonances with the data alone: against smoothed errors, which are
-            # small while a resonance is still off, the design prior would hold the values where they started
-            self._pscale = 0.0
+            if not prior_in_stages:
+                self._pscale = 0.0
             for w in stages:
                 self.smooth(w)
                 r = self.fit(x0s=x[None], grid=False, keep_starts=1, max_nfev=stage_nfev, circuit_free=circuit_free,

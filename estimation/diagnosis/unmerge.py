@@ -377,7 +377,7 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         ``(fit, candidate, merged)``: the best fit (couplings free), its
         :class:`Unmerged` and the fit with the couplings as designed.
     """
-    from .fit import DiagnosisError
+    from .fit import WIDE_CONTINUATION, DiagnosisError
 
     screened = []
     for um in unmerged_candidates(nominal, ports):
@@ -399,7 +399,8 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         for i in pick:
             try:
                 # continued through smoothed errors: the seeds' resonances are tens of per cent off the measured ones
-                res = fit.fit_continued(rows[i], stage_nfev=seed_nfev, max_nfev=seed_nfev, tol=1e-6)
+                res = fit.fit_continued(rows[i], stages=WIDE_CONTINUATION, stage_nfev=seed_nfev, max_nfev=seed_nfev,
+                                        tol=1e-6, prior_in_stages=False)
             except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
                 continue
             fitted.append((res.objective, um, fit, res))
