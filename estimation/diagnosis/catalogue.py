@@ -151,6 +151,10 @@ class Effect:
     f_ref: float = 1.0
     #: Highest frequency of the data, Hz (bounds the corner frequencies of relaxation forms).
     f_max: float = 0.0
+    #: Give the forms that have one a free level (the thesis's ``c_Rs`` of (2.6) and the causal skin form,
+    #: ``a_Lo`` of (2.5)). Only with a design prior: without one the level and the circuit values are not
+    #: separable.
+    level: bool = False
 
     @property
     def label(self) -> str:
@@ -209,6 +213,13 @@ class Effect:
         return circuit, ""
 
 
+#: A free level (``c`` of the skin forms, ``k`` of the magnetising thesis form) stays within this factor of 1.
+LEVEL_RANGE = 4.0
+
+_LEVEL_C = ExtraParameter("c", 1 / LEVEL_RANGE, LEVEL_RANGE, (1.0,),
+                          description="c_Rs: R_linear / R at low frequency (level)")
+
+
 def _band_top(e: Effect) -> float:
     """Highest frequency of the data (four decades above ``f_ref`` when not given), Hz."""
     return e.f_max if e.f_max > e.f_ref else 1e4 * e.f_ref
@@ -247,6 +258,8 @@ class SkinEffect(Effect):
                 ExtraParameter("f0", self.f_ref / 30, self.f_ref * 3e3, (self.f_ref / 3, self.f_ref * 3),
                                description="f0: frequency of R_linear, Hz"),
             ]
+            if self.level:
+                self.parameters.append(_LEVEL_C)
         elif self.form == "relaxation":
             lo, hi = _corner_range(self)
             self.parameters = [
@@ -259,17 +272,20 @@ class SkinEffect(Effect):
                 ExtraParameter("a", 1e-4, 1e4, (1e-3, 0.3, 10.0), description="resistance rise at f_ref (x R)"),
                 ExtraParameter("b", 0.1, 1.0, (0.5,), log=False, description="frequency exponent"),
             ]
+            if self.level:
+                self.parameters.append(_LEVEL_C)
 
     def branches(self, circuit, groups):
         return list(groups.resistors.get(self.group, ()))
 
     def factor(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
         """``R(f) / R`` (P, F)."""
+        c = _p(p, "c") if "c" in p else 1.0
         if self.form == "thesis":
-            return thesis_skin_resistance(f[None, :], 1.0, _p(p, "a"), _p(p, "b"), 1.0, _p(p, "f0")).astype(complex)
+            return thesis_skin_resistance(f[None, :], 1.0, _p(p, "a"), _p(p, "b"), c, _p(p, "f0")).astype(complex)
         if self.form == "relaxation":
             return 1 + _p(p, "a") * ((1 + 1j * f[None, :] / _p(p, "fc")) ** _p(p, "b") - 1)
-        return 1 + _p(p, "a") * (1j * f[None, :] / self.f_ref) ** _p(p, "b")
+        return (1 + _p(p, "a") * (1j * f[None, :] / self.f_ref) ** _p(p, "b")) / c
 
     def branch_changes(self, circuit, groups, values, f, p):
         names = self.branches(circuit, groups)
@@ -278,13 +294,16 @@ class SkinEffect(Effect):
         return _diag(names, dz)
 
     def formula(self, p):
+        c = p.get("c", 1.0)
         if self.form == "thesis":
-            return (f"R(f) = R_linear/c [1 + a (f/f0 - 1)^b] for f >= f0 (thesis 2.6), c = 1, a = {p['a']:.4g}, "
-                    f"b = {p['b']:.4g}, f0 = {p['f0']:.4g} Hz")
+            return (f"R(f) = R_linear/c [1 + a (f/f0 - 1)^b] for f >= f0 (thesis 2.6), c = {c:.4g}, "
+                    f"a = {p['a']:.4g}, b = {p['b']:.4g}, f0 = {p['f0']:.4g} Hz")
         if self.form == "relaxation":
             return (f"Z_R(f) = R [1 + a ((1 + j f/f_c)^b - 1)], a = {p['a']:.4g}, b = {p['b']:.4g}, "
                     f"f_c = {p['fc']:.4g} Hz")
-        return f"Z_R(f) = R [1 + a (j f/{self.f_ref:.4g} Hz)^b], a = {p['a']:.4g}, b = {p['b']:.4g}"
+        lead = "R/c [1 + a" if "c" in p else "R [1 + a"
+        tail = f", c = {c:.4g}" if "c" in p else ""
+        return f"Z_R(f) = {lead} (j f/{self.f_ref:.4g} Hz)^b], a = {p['a']:.4g}, b = {p['b']:.4g}{tail}"
 
     def realise(self, circuit, groups, p, fmin, fmax):
         values = circuit.resolve(check=False)
@@ -386,6 +405,9 @@ class MagnetisingInductance(Effect):
         lo = 0.0 if self.form == "thesis" else 1e-4
         self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
                                           description="b_Lo: exponent")]
+        if self.form == "thesis" and self.level:
+            self.parameters.append(ExtraParameter("k", 1 / LEVEL_RANGE, LEVEL_RANGE, (1.0,),
+                                                  description="L(f_ref) / L_linear (a_Lo = k f_ref^b)"))
 
     def branches(self, circuit, groups):
         group = set(n.lower() for n in groups.inductors.get(self.group, ()))
@@ -405,7 +427,8 @@ class MagnetisingInductance(Effect):
         """``L(f) / L`` (P, F)."""
         if self.form == "thesis":
             b = _p(p, "b")
-            return magnetising_inductance(f[None, :], 1.0, self.f_ref ** b, b).astype(complex)
+            k = _p(p, "k") if "k" in p else 1.0
+            return magnetising_inductance(f[None, :], 1.0, k * self.f_ref ** b, b).astype(complex)
         if self.form == "relaxation":
             d = _p(p, "d")
             return 1 - d + d * (1 + 1j * f[None, :] / _p(p, "fc")) ** (-_p(p, "b"))
@@ -429,6 +452,9 @@ class MagnetisingInductance(Effect):
 
     def formula(self, p):
         if self.form == "thesis":
+            if "k" in p:
+                return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = k f_ref^b = "
+                        f"{p['k'] * self.f_ref ** p['b']:.4g} (k = {p['k']:.4g}, f_ref = {self.f_ref:.4g} Hz)")
             return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
                     f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
         if self.form == "relaxation":
@@ -551,18 +577,19 @@ def _numeric(circuit: Circuit, name: str) -> Circuit:
 
 
 def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, one_port: bool,
-                    scale: float = 1.0, f_max: float = 1.0) -> list[Effect]:
-    """Every form and group of ``cause`` that applies to ``circuit``."""
+                    scale: float = 1.0, f_max: float = 1.0, level: bool = False) -> list[Effect]:
+    """Every form and group of ``cause`` that applies to ``circuit`` (with free levels when ``level``)."""
     out: list[Effect] = []
     names = [g for g in groups.resistors if g != "all"]
     group_list = (names + ["all"]) if len(names) > 1 else ["all"]
     for form in ("thesis", "causal", "relaxation"):
         if cause == "skin-effect":
-            out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
+            out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max, level=level) for g in group_list]
         elif cause == "magnetising-inductance":
-            out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
+            out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max, level=level) for g in group_list]
             if form == "thesis" and "core" in groups.inductors:  # the core loop's own inductance, lossless (2.5)
-                out.append(MagnetisingInductance(form=form, group="core", f_ref=f_ref, f_max=f_max))
+                out.append(MagnetisingInductance(form=form, group="core", f_ref=f_ref, f_max=f_max,
+                                                 level=level))
         elif cause == "core-loss" and form != "relaxation":
             out.append(CoreLoss(form=form, group="all", f_ref=f_ref, f_max=f_max))
     if one_port and cause == "stray-capacitance":

@@ -612,7 +612,8 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
     """
     circuit = base.fitted_circuit()
     groups = winding_groups(circuit, configuration_ports(ctx.configs), group_names(ctx.configs))
-    variants = effect_variants(cause, groups, circuit, float(ctx.f[0]), ctx.one_port, ctx.scale, float(ctx.f[-1]))
+    variants = effect_variants(cause, groups, circuit, float(ctx.f[0]), ctx.one_port, ctx.scale, float(ctx.f[-1]),
+                               level=ctx.prior is not None)
     pools: list[list[tuple[float, Effect, FrequencyFit, FitResult]]] = []
     best = None
     for start in [circuit] + ([ctx.nominal] if ctx.nominal is not None and not base.effects and from_nominal
