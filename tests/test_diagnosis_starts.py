@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from estimation.diagnosis import diagnose_frequency
-from estimation.diagnosis.catalogue import MagnetisingInductance, SkinEffect, winding_groups
+from estimation.diagnosis.catalogue import MagnetisingInductance, SkinEffect, effect_variants, winding_groups
 from pris_cosim.frf import Response, ResponseModel
+from pris_cosim.models import get_model
 from pris_cosim.netlist import parse_netlist
 
 from detectability import best_baseline_fit
@@ -139,4 +140,35 @@ def test_levels_only_with_a_design_prior():
     assert [q.name for q in SkinEffect(form="causal", f_ref=1e3).parameters] == ["a", "b"]
     assert [q.name for q in SkinEffect(form="relaxation", f_ref=1e3, level=True).parameters] == ["a", "b", "fc"]
     assert [q.name for q in MagnetisingInductance(form="thesis", f_ref=1e3).parameters] == ["b"]
-    assert [q.name for q in MagnetisingInductance(form="causal", f_ref=1e3, level=True).parameters] == ["b"]
+    assert [q.name for q in MagnetisingInductance(form="causal", f_ref=1e3).parameters] == ["b"]
+    assert [q.name for q in MagnetisingInductance(form="relaxation", f_ref=1e3, level=True).parameters] == [
+        "d", "b", "fc"]
+
+
+def test_core_group_causal_form_only_with_levels():
+    """The core loop's inductance gets the causal form (2.5) only with free levels (a design prior)."""
+    net = get_model("hv-6section-passive").circuit  # Lc || Rc, Lc coupled with the windings
+    groups = winding_groups(net, ["a1", "b1"])
+    assert groups.inductors.get("core") == ("Lc",)
+
+    def core_forms(level):
+        return [e.form for e in effect_variants("magnetising-inductance", groups, net, 10.0, False, level=level)
+                if e.group == "core"]
+
+    assert core_forms(False) == ["thesis"] and core_forms(True) == ["thesis", "causal"]
+
+
+def test_magnetising_causal_form_with_a_level_is_realised_by_a_passive_ladder():
+    """The realised inductor against ``j w L k (j f/f_ref)^(-b) + R`` written out here (``k`` the free level)."""
+    net = parse_netlist("* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n")
+    groups = winding_groups(net, ["n1"])
+    eff = MagnetisingInductance(form="causal", f_ref=10.0, f_max=1e5, level=True)
+    p = {"b": 0.08, "k": 1.4}
+    realised, _ = eff.realise(net, groups, p, 10.0, 1e5)
+    assert all(e.value > 0 for e in realised.elements if e.kind in "RL")
+    f = np.logspace(1.5, 4.5, 40)
+    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
+    want = 2.0 + 2j * np.pi * f * 10e-3 * 1.4 * (1j * f / 10.0) ** -0.08
+    err = np.log(z / want)
+    assert np.max(np.abs(err.real)) * 20 / np.log(10) < 0.1 and np.degrees(np.max(np.abs(err.imag))) < 1.0
+    assert "k = 1.4" in eff.formula(p)

@@ -405,7 +405,7 @@ class MagnetisingInductance(Effect):
         lo = 0.0 if self.form == "thesis" else 1e-4
         self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
                                           description="b_Lo: exponent")]
-        if self.form == "thesis" and self.level:
+        if self.form in ("thesis", "causal") and self.level:
             self.parameters.append(ExtraParameter("k", 1 / LEVEL_RANGE, LEVEL_RANGE, (1.0,),
                                                   description="L(f_ref) / L_linear (a_Lo = k f_ref^b)"))
 
@@ -432,7 +432,8 @@ class MagnetisingInductance(Effect):
         if self.form == "relaxation":
             d = _p(p, "d")
             return 1 - d + d * (1 + 1j * f[None, :] / _p(p, "fc")) ** (-_p(p, "b"))
-        return (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
+        k = _p(p, "k") if "k" in p else 1.0
+        return k * (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
 
     def branch_changes(self, circuit, groups, values, f, p):
         names = self.branches(circuit, groups)
@@ -460,6 +461,8 @@ class MagnetisingInductance(Effect):
         if self.form == "relaxation":
             return (f"L(f) = L [1 - d + d (1 + j f/f_c)^(-b)] (Davidson-Cole), d = {p['d']:.4g}, b = {p['b']:.4g}, "
                     f"f_c = {p['fc']:.4g} Hz")
+        if "k" in p:
+            return f"Z_L(f) = j w L k (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}, k = {p['k']:.4g}"
         return f"Z_L(f) = j w L (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}"
 
     def realise(self, circuit, groups, p, fmin, fmax):
@@ -587,7 +590,9 @@ def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, 
             out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max, level=level) for g in group_list]
         elif cause == "magnetising-inductance":
             out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max, level=level) for g in group_list]
-            if form == "thesis" and "core" in groups.inductors:  # the core loop's own inductance, lossless (2.5)
+            # the core loop's own inductance: lossless (2.5); with free levels (a design prior) also the causal
+            # form, whose loss angle b pi/2 the design's core-loss resistance cannot take
+            if "core" in groups.inductors and (form == "thesis" or (form == "causal" and level)):
                 out.append(MagnetisingInductance(form=form, group="core", f_ref=f_ref, f_max=f_max,
                                                  level=level))
         elif cause == "core-loss" and form != "relaxation":
