@@ -10,12 +10,25 @@ size). All forms name the same cause; the diagnosis fits them and keeps the
 best. With several windings each cause is tried per winding group (``lv``
 only, ``hv`` only, ``all``).
 
+Levels. The thesis's forms have a level besides their shape: ``c_Rs`` of
+(2.6) (``R_linear`` is the resistance where it was measured, ``R_linear / c``
+the one below ``f0``) and ``a_Lo`` of (2.5). Without a design prior a level
+and the circuit values are not separable, and it is pinned (``c = 1``,
+``a = f_ref^b``, ``f_ref`` the lowest frequency of the data). With a design
+prior (:mod:`.prior`) the circuit values are anchored at the design's, which
+are effective values at some frequency of the band, so the level is free
+(``level``; within ``1/LEVEL_RANGE .. LEVEL_RANGE``): ``c`` of the thesis and
+causal skin forms, ``k = L(f_ref) / L_linear`` of the thesis and causal
+magnetising forms. The relaxation forms equal the circuit value at low
+frequency and keep no level.
+
 ``skin-effect``
     thesis (2.6): ``R(f) = R_linear / c [1 + a (f/f0 - 1)^b]`` for
-    ``f >= f0`` (``R_linear / c`` below; ``R_linear / c`` is the fitted
-    circuit resistance, so ``c = 1``); causal: ``R (1 + a (j f/f_ref)^b)``
-    (``b = 1/2`` is the classical skin effect; its reactance is the internal
-    inductance); relaxation: ``R (1 + a [(1 + j f/f_c)^b - 1])``: ``R`` up to
+    ``f >= f0`` (``R_linear / c`` below; ``R_linear`` is the fitted
+    circuit resistance, ``c = 1`` unless the level is free); causal:
+    ``R / c (1 + a (j f/f_ref)^b)`` (``c = 1`` unless free; ``b = 1/2`` is the
+    classical skin effect; its reactance is the internal inductance);
+    relaxation: ``R (1 + a [(1 + j f/f_c)^b - 1])``: ``R`` up to
     about ``f_c`` (skin depth comparable with the conductor), then the
     power law; ``a = 1, b = 1/2`` is close to a round wire's Bessel impedance.
 ``core-loss``
@@ -23,13 +36,16 @@ only, ``hv`` only, ``all``).
     (``a`` in parallel with ``a / (2 pi b)`` H). A circuit without a core-loss
     resistor (one in parallel with an inductor) gets one at the port.
 ``magnetising-inductance``
-    thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = f_ref^b``: ``a`` and
-    ``L_linear`` are not separable, so ``L(f_ref) = L_linear``); causal:
-    ``L (j f/f_ref)^(-b)``; relaxation (the core's permeability dispersing
+    thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = k f_ref^b``, so
+    ``L(f_ref) = k L_linear``; ``k = 1`` unless the level is free); causal:
+    ``k L (j f/f_ref)^(-b)`` (its loss angle is ``b pi/2``); relaxation (the core's permeability dispersing
     above a corner, Davidson-Cole): ``L [1 - d + d (1 + j f/f_c)^(-b)]``,
     ``L`` below the corner, ``L (1 - d)`` far above it. Applied to the
     winding inductances with their mutuals (``M_ij`` scales with
-    ``sqrt(L_i L_j)``).
+    ``sqrt(L_i L_j)``), and (group ``core``) to the core loop's inductance
+    ``Lc`` of ``Lc || Rc``: lossless (2.5) always, the causal form only with
+    free levels (a design prior; without one its loss takes the share of a
+    core loss).
 ``stray-capacitance``
     one-port data: a lossy fixture capacitance across the port, the causal
     constant-phase admittance ``Y = w0 C (j f/f0)^alpha`` (``alpha = 1`` an

@@ -66,6 +66,7 @@ from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, wind
 from .evidence import band_table, localise, noise_floor, noise_weights, resonance_comparison, unexplained_bands
 from .holdout import held_out_gain
 from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
+from .forms import rechoose_forms
 from .fit import DiagnosisError, FitResult, FrequencyFit, configuration_ports, group_names, significant
 from .realise import realise_extended
 from .sections import section_candidates
@@ -501,6 +502,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         current, chosen, steps = _drop_redundant(ctx, current, chosen, steps, min_delta_bic, progress)
         if len(chosen) < n_named:  # the order forward selection gives the causes kept: by their single fits
             chosen.sort(key=lambda c: results[c].bic if c in results else np.inf)
+    if chosen and current.effects and not ctx.settled(current):  # each cause's form against all the others
+        current = rechoose_forms(ctx, current, min_delta_bic, _CANDIDATE_FAILURES, lambda m: _log(m, progress))
 
     extended = current if chosen else None
     cands = sorted(results.values(), key=lambda r: r.bic)
