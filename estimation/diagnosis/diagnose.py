@@ -42,6 +42,10 @@ Steps:
    couplings of the sections it touches (:mod:`.sections`), in its fit and
    every later refit of that model; one sought after a frequency-dependent
    cause keeps the couplings (with them free it would take that cause's rest).
+   A cause made redundant by those named after it is dropped; while the model
+   stays above the noise, each named cause's form and group is then chosen
+   again with the others in the model (:mod:`.forms`; a swap only if the BIC
+   improves by ``min_delta_bic``).
 4. What is still above the noise after the last step is reported by band
    (:func:`.evidence.unexplained_bands`).
 """
@@ -66,8 +70,8 @@ from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, wind
 from .evidence import band_table, localise, noise_floor, noise_weights, resonance_comparison, unexplained_bands
 from .holdout import held_out_gain
 from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
-from .forms import rechoose_forms
 from .fit import DiagnosisError, FitResult, FrequencyFit, configuration_ports, group_names, significant
+from .forms import rechoose_forms
 from .realise import realise_extended
 from .sections import section_candidates
 from .unmerge import missing_modes, resolved_points, search_unmerged
@@ -503,7 +507,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         if len(chosen) < n_named:  # the order forward selection gives the causes kept: by their single fits
             chosen.sort(key=lambda c: results[c].bic if c in results else np.inf)
     if chosen and current.effects and not ctx.settled(current):  # each cause's form against all the others
-        current = rechoose_forms(ctx, current, min_delta_bic, _CANDIDATE_FAILURES, lambda m: _log(m, progress))
+        current, swaps = rechoose_forms(ctx, current, min_delta_bic, _CANDIDATE_FAILURES, lambda m: _log(m, progress))
+        steps = steps + swaps
 
     extended = current if chosen else None
     cands = sorted(results.values(), key=lambda r: r.bic)

@@ -28,7 +28,7 @@ FULL_NFEV = 40
 
 
 def rechoose_forms(ctx: Any, current: FitResult, min_delta_bic: float, failures: tuple[type[Exception], ...],
-                   log: Callable[[str], None]) -> FitResult:
+                   log: Callable[[str], None]) -> tuple[FitResult, list[dict[str, Any]]]:
     """``current`` with each named effect's form and group chosen again (kept unless the BIC improves).
 
     Parameters
@@ -44,8 +44,17 @@ def rechoose_forms(ctx: Any, current: FitResult, min_delta_bic: float, failures:
         What a candidate's fit may raise (the candidate is skipped).
     log : callable
         Progress messages.
+
+    Returns
+    -------
+    FitResult
+        The model with the forms kept or swapped.
+    list of dict
+        One step per swap: ``cause``, ``"reformed": True``, ``model`` (the new form's label), ``delta_bic``,
+        ``cost``, ``gain`` (of the cost before the swap).
     """
     f = ctx.f
+    swaps: list[dict[str, Any]] = []
     for j in range(len(current.effects)):
         eff = current.effects[j]
         if eff.cause == "missing-section" or not eff.parameters:
@@ -81,10 +90,12 @@ def rechoose_forms(ctx: Any, current: FitResult, min_delta_bic: float, failures:
             log(f"{eff.label} -> {v.label}: cost {current.cost:.4g} -> {res.cost:.4g}, "
                 f"dBIC {current.bic - res.bic:.1f}")
             res.structure, res.causes, res.cause = current.structure, list(current.causes), current.cause
+            swaps.append({"cause": eff.cause, "reformed": True, "model": v.label, "delta_bic": current.bic - res.bic,
+                          "cost": res.cost, "gain": 1 - res.objective / current.objective})
             current = res
         else:
             log(f"{eff.label} kept (best other form {v.label}: dBIC {current.bic - res.bic:.1f})")
-    return current
+    return current, swaps
 
 
 def _nc(r: FitResult) -> int:
