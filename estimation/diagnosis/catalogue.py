@@ -12,20 +12,21 @@ only, ``hv`` only, ``all``).
 
 Levels. The thesis's forms have a level besides their shape: ``c_Rs`` of
 (2.6) (``R_linear`` is the resistance where it was measured, ``R_linear / c``
-the one below ``f0``) and ``a_Lo`` of (2.5). Without a design prior a level
-and the circuit values are not separable, and it is pinned (``c = 1``,
-``a = f_ref^b``, ``f_ref`` the lowest frequency of the data). With a design
-prior (:mod:`.prior`) the circuit values are anchored at the design's, which
-are effective values at some frequency of the band, so the level is free
-(``level``; within ``1/LEVEL_RANGE .. LEVEL_RANGE``): ``c`` of the thesis and
-causal skin forms, ``k = L(f_ref) / L_linear`` of the thesis and causal
-magnetising forms. The relaxation forms equal the circuit value at low
+the one below ``f0``) and ``a_Lo`` of (2.5). The thesis forms are fitted as
+printed with the level pinned (``c = 1``, ``a = f_ref^b``, ``f_ref`` the
+lowest frequency of the data). The causal power-law forms get a free level
+when there is a design prior (:mod:`.prior`; ``level``, within
+``1/LEVEL_RANGE .. LEVEL_RANGE``): the prior anchors the circuit values at the
+design's, which are effective values at some frequency of the band, and a
+form equal to them at ``f_ref`` would make the fit move them beyond the
+tolerance. Without a prior a level and the circuit values are not separable,
+and it stays 1. The relaxation forms equal the circuit value at low
 frequency and keep no level.
 
 ``skin-effect``
     thesis (2.6): ``R(f) = R_linear / c [1 + a (f/f0 - 1)^b]`` for
-    ``f >= f0`` (``R_linear / c`` below; ``R_linear`` is the fitted
-    circuit resistance, ``c = 1`` unless the level is free); causal:
+    ``f >= f0`` (``R_linear / c`` below; ``R_linear / c`` is the fitted
+    circuit resistance, so ``c = 1``); causal:
     ``R / c (1 + a (j f/f_ref)^b)`` (``c = 1`` unless free; ``b = 1/2`` is the
     classical skin effect; its reactance is the internal inductance);
     relaxation: ``R (1 + a [(1 + j f/f_c)^b - 1])``: ``R`` up to
@@ -36,9 +37,10 @@ frequency and keep no level.
     (``a`` in parallel with ``a / (2 pi b)`` H). A circuit without a core-loss
     resistor (one in parallel with an inductor) gets one at the port.
 ``magnetising-inductance``
-    thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = k f_ref^b``, so
-    ``L(f_ref) = k L_linear``; ``k = 1`` unless the level is free); causal:
-    ``k L (j f/f_ref)^(-b)`` (its loss angle is ``b pi/2``); relaxation (the core's permeability dispersing
+    thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = f_ref^b``: ``a`` and
+    ``L_linear`` are not separable, so ``L(f_ref) = L_linear``); causal:
+    ``k L (j f/f_ref)^(-b)`` (``k = 1`` unless the level is free; its loss
+    angle is ``b pi/2``); relaxation (the core's permeability dispersing
     above a corner, Davidson-Cole): ``L [1 - d + d (1 + j f/f_c)^(-b)]``,
     ``L`` below the corner, ``L (1 - d)`` far above it. Applied to the
     winding inductances with their mutuals (``M_ij`` scales with
@@ -167,9 +169,8 @@ class Effect:
     f_ref: float = 1.0
     #: Highest frequency of the data, Hz (bounds the corner frequencies of relaxation forms).
     f_max: float = 0.0
-    #: Give the forms that have one a free level (the thesis's ``c_Rs`` of (2.6) and the causal skin form,
-    #: ``a_Lo`` of (2.5)). Only with a design prior: without one the level and the circuit values are not
-    #: separable.
+    #: Give the causal power-law forms a free level (``c`` of the skin form, ``k`` of the magnetising form).
+    #: Only with a design prior: without one the level and the circuit values are not separable.
     level: bool = False
 
     @property
@@ -229,7 +230,7 @@ class Effect:
         return circuit, ""
 
 
-#: A free level (``c`` of the skin forms, ``k`` of the magnetising thesis form) stays within this factor of 1.
+#: A free level (``c`` of the causal skin form, ``k`` of the causal magnetising form) stays within this factor of 1.
 LEVEL_RANGE = 4.0
 
 _LEVEL_C = ExtraParameter("c", 1 / LEVEL_RANGE, LEVEL_RANGE, (1.0,),
@@ -274,8 +275,6 @@ class SkinEffect(Effect):
                 ExtraParameter("f0", self.f_ref / 30, self.f_ref * 3e3, (self.f_ref / 3, self.f_ref * 3),
                                description="f0: frequency of R_linear, Hz"),
             ]
-            if self.level:
-                self.parameters.append(_LEVEL_C)
         elif self.form == "relaxation":
             lo, hi = _corner_range(self)
             self.parameters = [
@@ -296,11 +295,11 @@ class SkinEffect(Effect):
 
     def factor(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
         """``R(f) / R`` (P, F)."""
-        c = _p(p, "c") if "c" in p else 1.0
         if self.form == "thesis":
-            return thesis_skin_resistance(f[None, :], 1.0, _p(p, "a"), _p(p, "b"), c, _p(p, "f0")).astype(complex)
+            return thesis_skin_resistance(f[None, :], 1.0, _p(p, "a"), _p(p, "b"), 1.0, _p(p, "f0")).astype(complex)
         if self.form == "relaxation":
             return 1 + _p(p, "a") * ((1 + 1j * f[None, :] / _p(p, "fc")) ** _p(p, "b") - 1)
+        c = _p(p, "c") if "c" in p else 1.0
         return (1 + _p(p, "a") * (1j * f[None, :] / self.f_ref) ** _p(p, "b")) / c
 
     def branch_changes(self, circuit, groups, values, f, p):
@@ -312,8 +311,8 @@ class SkinEffect(Effect):
     def formula(self, p):
         c = p.get("c", 1.0)
         if self.form == "thesis":
-            return (f"R(f) = R_linear/c [1 + a (f/f0 - 1)^b] for f >= f0 (thesis 2.6), c = {c:.4g}, "
-                    f"a = {p['a']:.4g}, b = {p['b']:.4g}, f0 = {p['f0']:.4g} Hz")
+            return (f"R(f) = R_linear/c [1 + a (f/f0 - 1)^b] for f >= f0 (thesis 2.6), c = 1, a = {p['a']:.4g}, "
+                    f"b = {p['b']:.4g}, f0 = {p['f0']:.4g} Hz")
         if self.form == "relaxation":
             return (f"Z_R(f) = R [1 + a ((1 + j f/f_c)^b - 1)], a = {p['a']:.4g}, b = {p['b']:.4g}, "
                     f"f_c = {p['fc']:.4g} Hz")
@@ -421,7 +420,7 @@ class MagnetisingInductance(Effect):
         lo = 0.0 if self.form == "thesis" else 1e-4
         self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
                                           description="b_Lo: exponent")]
-        if self.form in ("thesis", "causal") and self.level:
+        if self.form == "causal" and self.level:
             self.parameters.append(ExtraParameter("k", 1 / LEVEL_RANGE, LEVEL_RANGE, (1.0,),
                                                   description="L(f_ref) / L_linear (a_Lo = k f_ref^b)"))
 
@@ -443,8 +442,7 @@ class MagnetisingInductance(Effect):
         """``L(f) / L`` (P, F)."""
         if self.form == "thesis":
             b = _p(p, "b")
-            k = _p(p, "k") if "k" in p else 1.0
-            return magnetising_inductance(f[None, :], 1.0, k * self.f_ref ** b, b).astype(complex)
+            return magnetising_inductance(f[None, :], 1.0, self.f_ref ** b, b).astype(complex)
         if self.form == "relaxation":
             d = _p(p, "d")
             return 1 - d + d * (1 + 1j * f[None, :] / _p(p, "fc")) ** (-_p(p, "b"))
@@ -469,9 +467,6 @@ class MagnetisingInductance(Effect):
 
     def formula(self, p):
         if self.form == "thesis":
-            if "k" in p:
-                return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = k f_ref^b = "
-                        f"{p['k'] * self.f_ref ** p['b']:.4g} (k = {p['k']:.4g}, f_ref = {self.f_ref:.4g} Hz)")
             return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
                     f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
         if self.form == "relaxation":
