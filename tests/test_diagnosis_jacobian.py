@@ -60,10 +60,11 @@ def _one_port_effects(f: np.ndarray, scale: float) -> list:
          cat.StrayCapacitance(form="causal", group="port", f_ref=f[-1], c_scale=1 / (w * scale))],
         [cat.SkinEffect(form="causal", f_ref=f[0], level=True)],
         [cat.MagnetisingInductance(form="causal", f_ref=f[0], level=True)],
+        [cat.MagnetisingInductance(form="thesis", f_ref=f[0], level=True)],
     ]
 
 
-@pytest.mark.parametrize("which", range(12))
+@pytest.mark.parametrize("which", range(13))
 def test_one_port_circuit_columns_match_central_differences(which):
     circuit, cfg, f, data = _one_port()
     scale = float(np.median(np.abs(data["Zin"])))
@@ -112,10 +113,10 @@ def test_six_responses_with_a_parameter_couplings_and_voltage_ratios(couplings):
     assert np.max(np.abs(J - ref)) <= 1e-5 * np.max(np.abs(ref))
 
 
-@pytest.mark.parametrize("which", [10, 11])
+@pytest.mark.parametrize("which", [10, 11, 12])
 def test_level_columns_match_central_differences(which):
-    """The free levels' columns (``c`` of the causal skin form, ``k`` of the causal magnetising form) against
-    central differences."""
+    """The free levels' columns (``c`` of the causal skin form, ``k`` of the magnetising forms) against central
+    differences."""
     circuit, cfg, f, data = _one_port()
     scale = float(np.median(np.abs(data["Zin"])))
     effects = _one_port_effects(f, scale)[which]

@@ -105,13 +105,29 @@ def test_skin_causal_form_with_a_level_is_realised_by_a_passive_ladder():
     assert "c = 2" in eff.formula(p)
 
 
+def test_magnetising_thesis_form_with_a_level_follows_its_inductance():
+    """The realised inductance against ``a f^(-b) L_linear`` (thesis 2.5) with ``a = k f_ref^b`` written out here."""
+    net = parse_netlist("* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n")
+    groups = winding_groups(net, ["n1"])
+    eff = MagnetisingInductance(form="thesis", f_ref=10.0, f_max=1e5, level=True)
+    assert [q.name for q in eff.parameters] == ["b", "k"]
+    p = {"b": 0.05, "k": 1.5}
+    realised, _ = eff.realise(net, groups, p, 10.0, 1e5)
+    assert all(e.value > 0 for e in realised.elements if e.kind in "RL")
+    f = np.logspace(1.5, 4.5, 40)
+    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
+    want = 1.5 * 10.0**0.05 * f**-0.05 * 10e-3
+    assert np.max(np.abs(z.imag / (2 * np.pi * f) / want - 1)) < 0.05
+    assert "k = 1.5" in eff.formula(p)
+
+
 def test_levels_only_with_a_design_prior():
-    """Without ``level`` the causal forms keep their pinned levels (``c = 1``, ``k = 1``); the thesis and
+    """Without ``level`` the forms keep their pinned levels (``c = 1``, ``k = 1``); the thesis skin form and the
     relaxation forms never get one."""
     assert [q.name for q in SkinEffect(form="causal", f_ref=1e3).parameters] == ["a", "b"]
     assert [q.name for q in SkinEffect(form="relaxation", f_ref=1e3, level=True).parameters] == ["a", "b", "fc"]
     assert [q.name for q in SkinEffect(form="thesis", f_ref=1e3, level=True).parameters] == ["a", "b", "f0"]
-    assert [q.name for q in MagnetisingInductance(form="thesis", f_ref=1e3, level=True).parameters] == ["b"]
+    assert [q.name for q in MagnetisingInductance(form="thesis", f_ref=1e3).parameters] == ["b"]
     assert [q.name for q in MagnetisingInductance(form="causal", f_ref=1e3).parameters] == ["b"]
     assert [q.name for q in MagnetisingInductance(form="relaxation", f_ref=1e3, level=True).parameters] == [
         "d", "b", "fc"]

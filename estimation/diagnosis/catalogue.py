@@ -12,16 +12,17 @@ only, ``hv`` only, ``all``).
 
 Levels. The thesis's forms have a level besides their shape: ``c_Rs`` of
 (2.6) (``R_linear`` is the resistance where it was measured, ``R_linear / c``
-the one below ``f0``) and ``a_Lo`` of (2.5). The thesis forms are fitted as
-printed with the level pinned (``c = 1``, ``a = f_ref^b``, ``f_ref`` the
-lowest frequency of the data). The causal power-law forms get a free level
-when there is a design prior (:mod:`.prior`; ``level``, within
-``1/LEVEL_RANGE .. LEVEL_RANGE``): the prior anchors the circuit values at the
-design's, which are effective values at some frequency of the band, and a
-form equal to them at ``f_ref`` would make the fit move them beyond the
-tolerance. Without a prior a level and the circuit values are not separable,
-and it stays 1. The relaxation forms equal the circuit value at low
-frequency and keep no level.
+the one below ``f0``) and ``a_Lo`` of (2.5). With a design prior
+(:mod:`.prior`; ``level``, within ``1/LEVEL_RANGE .. LEVEL_RANGE``) the
+magnetising forms (2.5) and causal, and the causal skin form, have a free
+level: the prior anchors the circuit values at the design's, which are
+effective values at some frequency of the band, and a form equal to them at
+``f_ref`` (the lowest frequency of the data) would make the fit move them
+beyond the tolerance. Without a prior a level and the circuit values are not
+separable, and it is pinned (``c = 1``, ``a = f_ref^b``, ``k = 1``). The
+thesis skin form (2.6) keeps ``c = 1`` (with ``c`` free it converged to a
+worse fit on a design case); the relaxation forms equal the circuit value at
+low frequency and keep no level.
 
 ``skin-effect``
     thesis (2.6): ``R(f) = R_linear / c [1 + a (f/f0 - 1)^b]`` for
@@ -37,8 +38,8 @@ frequency and keep no level.
     (``a`` in parallel with ``a / (2 pi b)`` H). A circuit without a core-loss
     resistor (one in parallel with an inductor) gets one at the port.
 ``magnetising-inductance``
-    thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = f_ref^b``: ``a`` and
-    ``L_linear`` are not separable, so ``L(f_ref) = L_linear``); causal:
+    thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = k f_ref^b``, so
+    ``L(f_ref) = k L_linear``; ``k = 1`` unless the level is free); causal:
     ``k L (j f/f_ref)^(-b)`` (``k = 1`` unless the level is free; its loss
     angle is ``b pi/2``); relaxation (the core's permeability dispersing
     above a corner, Davidson-Cole): ``L [1 - d + d (1 + j f/f_c)^(-b)]``,
@@ -169,8 +170,9 @@ class Effect:
     f_ref: float = 1.0
     #: Highest frequency of the data, Hz (bounds the corner frequencies of relaxation forms).
     f_max: float = 0.0
-    #: Give the causal power-law forms a free level (``c`` of the skin form, ``k`` of the magnetising form).
-    #: Only with a design prior: without one the level and the circuit values are not separable.
+    #: Give the forms a free level where they take one (``c`` of the causal skin form, ``k`` of the thesis and
+    #: causal magnetising forms). Only with a design prior: without one the level and the circuit values are
+    #: not separable.
     level: bool = False
 
     @property
@@ -230,7 +232,7 @@ class Effect:
         return circuit, ""
 
 
-#: A free level (``c`` of the causal skin form, ``k`` of the causal magnetising form) stays within this factor of 1.
+#: A free level (``c`` of the causal skin form, ``k`` of the magnetising forms) stays within this factor of 1.
 LEVEL_RANGE = 4.0
 
 _LEVEL_C = ExtraParameter("c", 1 / LEVEL_RANGE, LEVEL_RANGE, (1.0,),
@@ -420,7 +422,7 @@ class MagnetisingInductance(Effect):
         lo = 0.0 if self.form == "thesis" else 1e-4
         self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
                                           description="b_Lo: exponent")]
-        if self.form == "causal" and self.level:
+        if self.form in ("thesis", "causal") and self.level:
             self.parameters.append(ExtraParameter("k", 1 / LEVEL_RANGE, LEVEL_RANGE, (1.0,),
                                                   description="L(f_ref) / L_linear (a_Lo = k f_ref^b)"))
 
@@ -442,7 +444,8 @@ class MagnetisingInductance(Effect):
         """``L(f) / L`` (P, F)."""
         if self.form == "thesis":
             b = _p(p, "b")
-            return magnetising_inductance(f[None, :], 1.0, self.f_ref ** b, b).astype(complex)
+            k = _p(p, "k") if "k" in p else 1.0
+            return magnetising_inductance(f[None, :], 1.0, k * self.f_ref ** b, b).astype(complex)
         if self.form == "relaxation":
             d = _p(p, "d")
             return 1 - d + d * (1 + 1j * f[None, :] / _p(p, "fc")) ** (-_p(p, "b"))
@@ -467,6 +470,9 @@ class MagnetisingInductance(Effect):
 
     def formula(self, p):
         if self.form == "thesis":
+            if "k" in p:
+                return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = k f_ref^b = "
+                        f"{p['k'] * self.f_ref ** p['b']:.4g} (k = {p['k']:.4g}, f_ref = {self.f_ref:.4g} Hz)")
             return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
                     f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
         if self.form == "relaxation":
