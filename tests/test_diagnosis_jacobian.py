@@ -58,10 +58,13 @@ def _one_port_effects(f: np.ndarray, scale: float) -> list:
         [cat.LeadInductance(form="causal", group="port", f_ref=f[-1], l_scale=scale / w, r_scale=scale)],
         [cat.SkinEffect(form="causal", f_ref=f[0]), cat.CoreLoss(form="thesis", f_ref=f[0]),
          cat.StrayCapacitance(form="causal", group="port", f_ref=f[-1], c_scale=1 / (w * scale))],
+        [cat.SkinEffect(form="causal", f_ref=f[0], level=True)],
+        [cat.MagnetisingInductance(form="causal", f_ref=f[0], level=True)],
+        [cat.MagnetisingInductance(form="thesis", f_ref=f[0], level=True)],
     ]
 
 
-@pytest.mark.parametrize("which", range(10))
+@pytest.mark.parametrize("which", range(13))
 def test_one_port_circuit_columns_match_central_differences(which):
     circuit, cfg, f, data = _one_port()
     scale = float(np.median(np.abs(data["Zin"])))
@@ -108,3 +111,20 @@ def test_six_responses_with_a_parameter_couplings_and_voltage_ratios(couplings):
     # the responses' own rounding (eigenvectors of a stiff network) needs a larger step
     ref = _central(fit, x, 1e-4)
     assert np.max(np.abs(J - ref)) <= 1e-5 * np.max(np.abs(ref))
+
+
+@pytest.mark.parametrize("which", [10, 11, 12])
+def test_level_columns_match_central_differences(which):
+    """The free levels' columns (``c`` of the causal skin form, ``k`` of the magnetising forms) against central
+    differences."""
+    circuit, cfg, f, data = _one_port()
+    scale = float(np.median(np.abs(data["Zin"])))
+    effects = _one_port_effects(f, scale)[which]
+    fit = FrequencyFit(circuit, cfg, f, data, effects=effects, scale=scale)
+    x = _moved(fit)
+    x[-1] = np.log(1.3)  # the level, off 1
+    J = fit.jacobian(x)[:, -1]
+    e = np.zeros(x.size)
+    e[-1] = 1e-5
+    ref = (fit.residuals(x + e) - fit.residuals(x - e)) / 2e-5
+    assert np.max(np.abs(ref)) > 0 and np.max(np.abs(J - ref)) <= 1e-3 * np.max(np.abs(ref))

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from estimation.diagnosis import diagnose_frequency
-from estimation.diagnosis.catalogue import MagnetisingInductance, SkinEffect, winding_groups
+from estimation.diagnosis.catalogue import MagnetisingInductance, SkinEffect, effect_variants, winding_groups
 from pris_cosim.frf import Response, ResponseModel
+from pris_cosim.models import get_model
 from pris_cosim.netlist import parse_netlist
 
 from detectability import best_baseline_fit
@@ -84,3 +85,78 @@ def test_magnetising_relaxation_form_is_realised_by_a_passive_ladder():
     want = 2.0 + 2j * np.pi * f * 10e-3 * (1 - p["d"] + p["d"] * (1 + 1j * f / p["fc"]) ** (-p["b"]))
     err = np.log(z / want)
     assert np.max(np.abs(err.real)) * 20 / np.log(10) < 0.1 and np.degrees(np.max(np.abs(err.imag))) < 1.0
+
+
+def test_skin_causal_form_with_a_level_is_realised_by_a_passive_ladder():
+    """The realised ladder against ``R/c (1 + a (j f/f_ref)^b) + j w L`` written out here (``c`` the free level)."""
+    net = parse_netlist("* one winding section\nR1 n1 x 2.0\nL1 x 0 100u\n")
+    groups = winding_groups(net, ["n1"])
+    eff = SkinEffect(form="causal", f_ref=1e3, f_max=1e7, level=True)
+    assert [q.name for q in eff.parameters] == ["a", "b", "c"]
+    p = {"a": 0.3, "b": 0.5, "c": 2.0}
+    realised, note = eff.realise(net, groups, p, 1e3, 1e7)
+    assert "passive" in note
+    assert all(e.value > 0 for e in realised.elements if e.kind in "RL")
+    f = np.logspace(3, 7, 60)
+    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
+    want = 2.0 / 2.0 * (1 + 0.3 * (1j * f / 1e3) ** 0.5) + 2j * np.pi * f * 100e-6
+    err = np.log(z / want)
+    assert np.max(np.abs(err.real)) * 20 / np.log(10) < 0.1 and np.degrees(np.max(np.abs(err.imag))) < 1.0
+    assert "c = 2" in eff.formula(p)
+
+
+def test_magnetising_thesis_form_with_a_level_follows_its_inductance():
+    """The realised inductance against ``a f^(-b) L_linear`` (thesis 2.5) with ``a = k f_ref^b`` written out here."""
+    net = parse_netlist("* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n")
+    groups = winding_groups(net, ["n1"])
+    eff = MagnetisingInductance(form="thesis", f_ref=10.0, f_max=1e5, level=True)
+    assert [q.name for q in eff.parameters] == ["b", "k"]
+    p = {"b": 0.05, "k": 1.5}
+    realised, _ = eff.realise(net, groups, p, 10.0, 1e5)
+    assert all(e.value > 0 for e in realised.elements if e.kind in "RL")
+    f = np.logspace(1.5, 4.5, 40)
+    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
+    want = 1.5 * 10.0**0.05 * f**-0.05 * 10e-3
+    assert np.max(np.abs(z.imag / (2 * np.pi * f) / want - 1)) < 0.05
+    assert "k = 1.5" in eff.formula(p)
+
+
+def test_levels_only_with_a_design_prior():
+    """Without ``level`` the forms keep their pinned levels (``c = 1``, ``k = 1``); the thesis skin form and the
+    relaxation forms never get one."""
+    assert [q.name for q in SkinEffect(form="causal", f_ref=1e3).parameters] == ["a", "b"]
+    assert [q.name for q in SkinEffect(form="relaxation", f_ref=1e3, level=True).parameters] == ["a", "b", "fc"]
+    assert [q.name for q in SkinEffect(form="thesis", f_ref=1e3, level=True).parameters] == ["a", "b", "f0"]
+    assert [q.name for q in MagnetisingInductance(form="thesis", f_ref=1e3).parameters] == ["b"]
+    assert [q.name for q in MagnetisingInductance(form="causal", f_ref=1e3).parameters] == ["b"]
+    assert [q.name for q in MagnetisingInductance(form="relaxation", f_ref=1e3, level=True).parameters] == [
+        "d", "b", "fc"]
+
+
+def test_core_group_causal_form_only_with_levels():
+    """The core loop's inductance gets the causal form (2.5) only with free levels (a design prior)."""
+    net = get_model("hv-6section-passive").circuit  # Lc || Rc, Lc coupled with the windings
+    groups = winding_groups(net, ["a1", "b1"])
+    assert groups.inductors.get("core") == ("Lc",)
+
+    def core_forms(level):
+        return [e.form for e in effect_variants("magnetising-inductance", groups, net, 10.0, False, level=level)
+                if e.group == "core"]
+
+    assert core_forms(False) == ["thesis"] and core_forms(True) == ["thesis", "causal"]
+
+
+def test_magnetising_causal_form_with_a_level_is_realised_by_a_passive_ladder():
+    """The realised inductor against ``j w L k (j f/f_ref)^(-b) + R`` written out here (``k`` the free level)."""
+    net = parse_netlist("* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n")
+    groups = winding_groups(net, ["n1"])
+    eff = MagnetisingInductance(form="causal", f_ref=10.0, f_max=1e5, level=True)
+    p = {"b": 0.08, "k": 1.4}
+    realised, _ = eff.realise(net, groups, p, 10.0, 1e5)
+    assert all(e.value > 0 for e in realised.elements if e.kind in "RL")
+    f = np.logspace(1.5, 4.5, 40)
+    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
+    want = 2.0 + 2j * np.pi * f * 10e-3 * 1.4 * (1j * f / 10.0) ** -0.08
+    err = np.log(z / want)
+    assert np.max(np.abs(err.real)) * 20 / np.log(10) < 0.1 and np.degrees(np.max(np.abs(err.imag))) < 1.0
+    assert "k = 1.4" in eff.formula(p)

@@ -10,12 +10,27 @@ size). All forms name the same cause; the diagnosis fits them and keeps the
 best. With several windings each cause is tried per winding group (``lv``
 only, ``hv`` only, ``all``).
 
+Levels. The thesis's forms have a level besides their shape: ``c_Rs`` of
+(2.6) (``R_linear`` is the resistance where it was measured, ``R_linear / c``
+the one below ``f0``) and ``a_Lo`` of (2.5). With a design prior
+(:mod:`.prior`; ``level``, within ``1/LEVEL_RANGE .. LEVEL_RANGE``) the
+magnetising forms (2.5) and causal, and the causal skin form, have a free
+level: the prior anchors the circuit values at the design's, which are
+effective values at some frequency of the band, and a form equal to them at
+``f_ref`` (the lowest frequency of the data) would make the fit move them
+beyond the tolerance. Without a prior a level and the circuit values are not
+separable, and it is pinned (``c = 1``, ``a = f_ref^b``, ``k = 1``). The
+thesis skin form (2.6) keeps ``c = 1`` (with ``c`` free it converged to a
+worse fit on a design case); the relaxation forms equal the circuit value at
+low frequency and keep no level.
+
 ``skin-effect``
     thesis (2.6): ``R(f) = R_linear / c [1 + a (f/f0 - 1)^b]`` for
     ``f >= f0`` (``R_linear / c`` below; ``R_linear / c`` is the fitted
-    circuit resistance, so ``c = 1``); causal: ``R (1 + a (j f/f_ref)^b)``
-    (``b = 1/2`` is the classical skin effect; its reactance is the internal
-    inductance); relaxation: ``R (1 + a [(1 + j f/f_c)^b - 1])``: ``R`` up to
+    circuit resistance, so ``c = 1``); causal:
+    ``R / c (1 + a (j f/f_ref)^b)`` (``c = 1`` unless free; ``b = 1/2`` is the
+    classical skin effect; its reactance is the internal inductance);
+    relaxation: ``R (1 + a [(1 + j f/f_c)^b - 1])``: ``R`` up to
     about ``f_c`` (skin depth comparable with the conductor), then the
     power law; ``a = 1, b = 1/2`` is close to a round wire's Bessel impedance.
 ``core-loss``
@@ -23,13 +38,17 @@ only, ``hv`` only, ``all``).
     (``a`` in parallel with ``a / (2 pi b)`` H). A circuit without a core-loss
     resistor (one in parallel with an inductor) gets one at the port.
 ``magnetising-inductance``
-    thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = f_ref^b``: ``a`` and
-    ``L_linear`` are not separable, so ``L(f_ref) = L_linear``); causal:
-    ``L (j f/f_ref)^(-b)``; relaxation (the core's permeability dispersing
+    thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = k f_ref^b``, so
+    ``L(f_ref) = k L_linear``; ``k = 1`` unless the level is free); causal:
+    ``k L (j f/f_ref)^(-b)`` (``k = 1`` unless the level is free; its loss
+    angle is ``b pi/2``); relaxation (the core's permeability dispersing
     above a corner, Davidson-Cole): ``L [1 - d + d (1 + j f/f_c)^(-b)]``,
     ``L`` below the corner, ``L (1 - d)`` far above it. Applied to the
     winding inductances with their mutuals (``M_ij`` scales with
-    ``sqrt(L_i L_j)``).
+    ``sqrt(L_i L_j)``), and (group ``core``) to the core loop's inductance
+    ``Lc`` of ``Lc || Rc``: lossless (2.5) always, the causal form only with
+    free levels (a design prior; without one its loss takes the share of a
+    core loss).
 ``stray-capacitance``
     one-port data: a lossy fixture capacitance across the port, the causal
     constant-phase admittance ``Y = w0 C (j f/f0)^alpha`` (``alpha = 1`` an
@@ -151,6 +170,10 @@ class Effect:
     f_ref: float = 1.0
     #: Highest frequency of the data, Hz (bounds the corner frequencies of relaxation forms).
     f_max: float = 0.0
+    #: Give the forms a free level where they take one (``c`` of the causal skin form, ``k`` of the thesis and
+    #: causal magnetising forms). Only with a design prior: without one the level and the circuit values are
+    #: not separable.
+    level: bool = False
 
     @property
     def label(self) -> str:
@@ -209,6 +232,13 @@ class Effect:
         return circuit, ""
 
 
+#: A free level (``c`` of the causal skin form, ``k`` of the magnetising forms) stays within this factor of 1.
+LEVEL_RANGE = 4.0
+
+_LEVEL_C = ExtraParameter("c", 1 / LEVEL_RANGE, LEVEL_RANGE, (1.0,),
+                          description="c_Rs: R_linear / R at low frequency (level)")
+
+
 def _band_top(e: Effect) -> float:
     """Highest frequency of the data (four decades above ``f_ref`` when not given), Hz."""
     return e.f_max if e.f_max > e.f_ref else 1e4 * e.f_ref
@@ -259,6 +289,8 @@ class SkinEffect(Effect):
                 ExtraParameter("a", 1e-4, 1e4, (1e-3, 0.3, 10.0), description="resistance rise at f_ref (x R)"),
                 ExtraParameter("b", 0.1, 1.0, (0.5,), log=False, description="frequency exponent"),
             ]
+            if self.level:
+                self.parameters.append(_LEVEL_C)
 
     def branches(self, circuit, groups):
         return list(groups.resistors.get(self.group, ()))
@@ -269,7 +301,8 @@ class SkinEffect(Effect):
             return thesis_skin_resistance(f[None, :], 1.0, _p(p, "a"), _p(p, "b"), 1.0, _p(p, "f0")).astype(complex)
         if self.form == "relaxation":
             return 1 + _p(p, "a") * ((1 + 1j * f[None, :] / _p(p, "fc")) ** _p(p, "b") - 1)
-        return 1 + _p(p, "a") * (1j * f[None, :] / self.f_ref) ** _p(p, "b")
+        c = _p(p, "c") if "c" in p else 1.0
+        return (1 + _p(p, "a") * (1j * f[None, :] / self.f_ref) ** _p(p, "b")) / c
 
     def branch_changes(self, circuit, groups, values, f, p):
         names = self.branches(circuit, groups)
@@ -278,13 +311,16 @@ class SkinEffect(Effect):
         return _diag(names, dz)
 
     def formula(self, p):
+        c = p.get("c", 1.0)
         if self.form == "thesis":
             return (f"R(f) = R_linear/c [1 + a (f/f0 - 1)^b] for f >= f0 (thesis 2.6), c = 1, a = {p['a']:.4g}, "
                     f"b = {p['b']:.4g}, f0 = {p['f0']:.4g} Hz")
         if self.form == "relaxation":
             return (f"Z_R(f) = R [1 + a ((1 + j f/f_c)^b - 1)], a = {p['a']:.4g}, b = {p['b']:.4g}, "
                     f"f_c = {p['fc']:.4g} Hz")
-        return f"Z_R(f) = R [1 + a (j f/{self.f_ref:.4g} Hz)^b], a = {p['a']:.4g}, b = {p['b']:.4g}"
+        lead = "R/c [1 + a" if "c" in p else "R [1 + a"
+        tail = f", c = {c:.4g}" if "c" in p else ""
+        return f"Z_R(f) = {lead} (j f/{self.f_ref:.4g} Hz)^b], a = {p['a']:.4g}, b = {p['b']:.4g}{tail}"
 
     def realise(self, circuit, groups, p, fmin, fmax):
         values = circuit.resolve(check=False)
@@ -386,6 +422,9 @@ class MagnetisingInductance(Effect):
         lo = 0.0 if self.form == "thesis" else 1e-4
         self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
                                           description="b_Lo: exponent")]
+        if self.form in ("thesis", "causal") and self.level:
+            self.parameters.append(ExtraParameter("k", 1 / LEVEL_RANGE, LEVEL_RANGE, (1.0,),
+                                                  description="L(f_ref) / L_linear (a_Lo = k f_ref^b)"))
 
     def branches(self, circuit, groups):
         group = set(n.lower() for n in groups.inductors.get(self.group, ()))
@@ -405,11 +444,13 @@ class MagnetisingInductance(Effect):
         """``L(f) / L`` (P, F)."""
         if self.form == "thesis":
             b = _p(p, "b")
-            return magnetising_inductance(f[None, :], 1.0, self.f_ref ** b, b).astype(complex)
+            k = _p(p, "k") if "k" in p else 1.0
+            return magnetising_inductance(f[None, :], 1.0, k * self.f_ref ** b, b).astype(complex)
         if self.form == "relaxation":
             d = _p(p, "d")
             return 1 - d + d * (1 + 1j * f[None, :] / _p(p, "fc")) ** (-_p(p, "b"))
-        return (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
+        k = _p(p, "k") if "k" in p else 1.0
+        return k * (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
 
     def branch_changes(self, circuit, groups, values, f, p):
         names = self.branches(circuit, groups)
@@ -429,11 +470,16 @@ class MagnetisingInductance(Effect):
 
     def formula(self, p):
         if self.form == "thesis":
+            if "k" in p:
+                return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = k f_ref^b = "
+                        f"{p['k'] * self.f_ref ** p['b']:.4g} (k = {p['k']:.4g}, f_ref = {self.f_ref:.4g} Hz)")
             return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
                     f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
         if self.form == "relaxation":
             return (f"L(f) = L [1 - d + d (1 + j f/f_c)^(-b)] (Davidson-Cole), d = {p['d']:.4g}, b = {p['b']:.4g}, "
                     f"f_c = {p['fc']:.4g} Hz")
+        if "k" in p:
+            return f"Z_L(f) = j w L k (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}, k = {p['k']:.4g}"
         return f"Z_L(f) = j w L (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}"
 
     def realise(self, circuit, groups, p, fmin, fmax):
@@ -551,18 +597,21 @@ def _numeric(circuit: Circuit, name: str) -> Circuit:
 
 
 def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, one_port: bool,
-                    scale: float = 1.0, f_max: float = 1.0) -> list[Effect]:
-    """Every form and group of ``cause`` that applies to ``circuit``."""
+                    scale: float = 1.0, f_max: float = 1.0, level: bool = False) -> list[Effect]:
+    """Every form and group of ``cause`` that applies to ``circuit`` (with free levels when ``level``)."""
     out: list[Effect] = []
     names = [g for g in groups.resistors if g != "all"]
     group_list = (names + ["all"]) if len(names) > 1 else ["all"]
     for form in ("thesis", "causal", "relaxation"):
         if cause == "skin-effect":
-            out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
+            out += [SkinEffect(form=form, group=g, f_ref=f_ref, f_max=f_max, level=level) for g in group_list]
         elif cause == "magnetising-inductance":
-            out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max) for g in group_list]
-            if form == "thesis" and "core" in groups.inductors:  # the core loop's own inductance, lossless (2.5)
-                out.append(MagnetisingInductance(form=form, group="core", f_ref=f_ref, f_max=f_max))
+            out += [MagnetisingInductance(form=form, group=g, f_ref=f_ref, f_max=f_max, level=level) for g in group_list]
+            # the core loop's own inductance: lossless (2.5); with free levels (a design prior) also the causal
+            # form, whose loss angle b pi/2 the design's core-loss resistance cannot take
+            if "core" in groups.inductors and (form == "thesis" or (form == "causal" and level)):
+                out.append(MagnetisingInductance(form=form, group="core", f_ref=f_ref, f_max=f_max,
+                                                 level=level))
         elif cause == "core-loss" and form != "relaxation":
             out.append(CoreLoss(form=form, group="all", f_ref=f_ref, f_max=f_max))
     if one_port and cause == "stray-capacitance":

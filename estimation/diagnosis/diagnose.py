@@ -42,6 +42,10 @@ Steps:
    couplings of the sections it touches (:mod:`.sections`), in its fit and
    every later refit of that model; one sought after a frequency-dependent
    cause keeps the couplings (with them free it would take that cause's rest).
+   A cause made redundant by those named after it is dropped; while the model
+   stays above the noise, each named cause's form and group is then chosen
+   again with the others in the model (:mod:`.forms`; a swap only if the BIC
+   improves by ``min_delta_bic``).
 4. What is still above the noise after the last step is reported by band
    (:func:`.evidence.unexplained_bands`).
 """
@@ -67,6 +71,7 @@ from .evidence import band_table, localise, noise_floor, noise_weights, resonanc
 from .holdout import held_out_gain
 from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from .fit import DiagnosisError, FitResult, FrequencyFit, configuration_ports, group_names, significant
+from .forms import rechoose_forms
 from .realise import realise_extended
 from .sections import section_candidates
 from .unmerge import missing_modes, resolved_points, search_unmerged
@@ -501,6 +506,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         current, chosen, steps = _drop_redundant(ctx, current, chosen, steps, min_delta_bic, progress)
         if len(chosen) < n_named:  # the order forward selection gives the causes kept: by their single fits
             chosen.sort(key=lambda c: results[c].bic if c in results else np.inf)
+    if chosen and current.effects and not ctx.settled(current):  # each cause's form against all the others
+        current, swaps = rechoose_forms(ctx, current, min_delta_bic, _CANDIDATE_FAILURES, lambda m: _log(m, progress))
+        steps = steps + swaps
 
     extended = current if chosen else None
     cands = sorted(results.values(), key=lambda r: r.bic)
@@ -612,7 +620,8 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
     """
     circuit = base.fitted_circuit()
     groups = winding_groups(circuit, configuration_ports(ctx.configs), group_names(ctx.configs))
-    variants = effect_variants(cause, groups, circuit, float(ctx.f[0]), ctx.one_port, ctx.scale, float(ctx.f[-1]))
+    variants = effect_variants(cause, groups, circuit, float(ctx.f[0]), ctx.one_port, ctx.scale, float(ctx.f[-1]),
+                               level=ctx.prior is not None)
     pools: list[list[tuple[float, Effect, FrequencyFit, FitResult]]] = []
     best = None
     for start in [circuit] + ([ctx.nominal] if ctx.nominal is not None and not base.effects and from_nominal
