@@ -362,10 +362,11 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         Evaluations of the short fits of every seed kept, of the final fit
         of the best, and of its fit with the couplings free.
     all_seeds : bool
-        Fit every seed (not only those picked by resonance and cost), each
-        continued through smoothed errors (:meth:`.fit.FrequencyFit.fit_continued`,
-        ``seed_nfev`` evaluations per stage); the best ``by_resonance + by_cost``
-        of each candidate go on.
+        Also fit every seed continued through smoothed errors from a decade
+        down (:meth:`.fit.FrequencyFit.fit_continued`, ``seed_nfev``
+        evaluations per stage), the prior out of the smoothed stages; the
+        best of those gets its final fit too, and the better of the two
+        final fits is returned.
     free_couplings : bool
         Refit the best with the couplings the split touches free.
     resolved : mapping, optional
@@ -379,7 +380,7 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
     """
     from .fit import WIDE_CONTINUATION, DiagnosisError
 
-    screened = []
+    screened, continued = [], []
     for um in unmerged_candidates(nominal, ports):
         try:
             fit = make_fit(um.candidate.circuit, ())
@@ -393,22 +394,34 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
                           for i in range(len(rows))])
         pick = list(np.lexsort((cost, score))[:by_resonance])
         pick += [i for i in np.argsort(cost) if i not in pick][:by_cost]
-        if all_seeds:  # which seed leads to the measured resonances shows only once it is fitted
-            pick += [i for i in range(len(rows)) if i not in pick]
-        fitted = []
         for i in pick:
+            try:
+                res = fit.fit(x0s=rows[i][None], grid=False, max_nfev=screen_nfev, tol=1e-6)
+            except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
+                continue
+            screened.append((res.cost, um, fit, res))
+        if not all_seeds:
+            continue
+        fitted = []
+        for i in range(len(rows)):  # which seed leads to the measured resonances shows only once it is fitted
             try:
                 # continued through smoothed errors: the seeds' resonances are tens of per cent off the measured ones
                 res = fit.fit_continued(rows[i], stages=WIDE_CONTINUATION, stage_nfev=seed_nfev, max_nfev=seed_nfev,
                                         tol=1e-6, prior_in_stages=False)
             except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
                 continue
-            fitted.append((res.objective, um, fit, res))
-        screened += sorted(fitted, key=lambda t: t[0])[:by_resonance + by_cost]
-    if not screened:
-        return None
-    screened.sort(key=lambda t: t[0])
-    _, um, fit, first = screened[0]
+            fitted.append((res.cost, um, fit, res))
+        continued += sorted(fitted, key=lambda t: t[0])[:by_resonance + by_cost]
+    found = [_finish(min(group, key=lambda t: t[0]), make_fit, max_nfev, coupling_nfev, free_couplings)
+             for group in (screened, continued) if group]
+    return min(found, key=lambda t: t[0].objective) if found else None
+
+
+def _finish(best: tuple, make_fit: Callable, max_nfev: int, coupling_nfev: int, free_couplings: bool) -> tuple:
+    """The final fit of a screened seed, then with the couplings the split touches free: (fit, candidate, merged)."""
+    from .fit import DiagnosisError
+
+    _, um, fit, first = best
     try:
         res = fit.fit(x0s=first.x[None], grid=False, max_nfev=max_nfev, tol=1e-7)
     except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
