@@ -709,7 +709,8 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
                                     or missing_modes(ctx.f, ctx.data, base.predicted, ctx.resolved) > 0):
         found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports, tail,
-                                free_couplings=not effects, resolved=ctx.resolved, all_seeds=not effects and ctx.one_port)
+                                free_couplings=not effects, resolved=ctx.resolved,
+                                all_seeds=not effects and ctx.one_port and base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor)
         if found is not None and (best is None or found[0].objective < best.objective):
             best, um, merged = found
             best.structure = um.candidate.how
