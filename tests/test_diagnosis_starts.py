@@ -56,66 +56,58 @@ def test_split_that_reaches_the_noise_is_named_without_a_missing_resonance():
     assert d.best.cost <= 1.25 * d.noise["cost"]
 
 
-def test_skin_relaxation_form_is_realised_by_a_passive_ladder():
-    """The realised ladder's impedance against ``R (1 + a ((1 + j f/f_c)^b - 1)) + j w L`` written out here."""
-    net = parse_netlist("* one winding section\nR1 n1 x 2.0\nL1 x 0 100u\n")
-    groups = winding_groups(net, ["n1"])
-    eff = SkinEffect(form="relaxation", f_ref=1e3, f_max=1e7)
-    p = {"a": 1.0, "b": 0.5, "fc": 3e4}
-    realised, note = eff.realise(net, groups, p, 1e3, 1e7)
-    assert "passive" in note
+def _realised(eff, netlist: str, p: dict, fmin: float, fmax: float, f: np.ndarray):
+    """``eff`` realised on a one-section netlist: the realised circuit, its note, and its impedance at ``f``."""
+    net = parse_netlist(netlist)
+    realised, note = eff.realise(net, winding_groups(net, ["n1"]), p, fmin, fmax)
     assert all(e.value > 0 for e in realised.elements if e.kind in "RL")
-    f = np.logspace(3, 7, 60)
-    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
-    want = 2.0 * (1 + p["a"] * ((1 + 1j * f / p["fc"]) ** p["b"] - 1)) + 2j * np.pi * f * 100e-6
+    return realised, note, ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
+
+
+def _assert_within(z: np.ndarray, want: np.ndarray) -> None:
+    """Within 0.1 dB and 1 degree everywhere."""
     err = np.log(z / want)
     assert np.max(np.abs(err.real)) * 20 / np.log(10) < 0.1 and np.degrees(np.max(np.abs(err.imag))) < 1.0
+
+
+def test_skin_relaxation_form_is_realised_by_a_passive_ladder():
+    """The realised ladder's impedance against ``R (1 + a ((1 + j f/f_c)^b - 1)) + j w L`` written out here."""
+    eff = SkinEffect(form="relaxation", f_ref=1e3, f_max=1e7)
+    p = {"a": 1.0, "b": 0.5, "fc": 3e4}
+    f = np.logspace(3, 7, 60)
+    _, note, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 100u\n", p, 1e3, 1e7, f)
+    assert "passive" in note
+    _assert_within(z, 2.0 * (1 + p["a"] * ((1 + 1j * f / p["fc"]) ** p["b"] - 1)) + 2j * np.pi * f * 100e-6)
 
 
 def test_magnetising_relaxation_form_is_realised_by_a_passive_ladder():
     """The realised inductor's impedance against ``j w L [1 - d + d (1 + j f/f_c)^(-b)] + R`` written out here."""
-    net = parse_netlist("* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n")
-    groups = winding_groups(net, ["n1"])
     eff = MagnetisingInductance(form="relaxation", f_ref=1e3, f_max=1e7)
     p = {"d": 0.4, "b": 0.7, "fc": 2e5}
-    realised, _ = eff.realise(net, groups, p, 1e3, 1e7)
-    assert all(e.value > 0 for e in realised.elements if e.kind in "RL")
     f = np.logspace(3, 7, 60)
-    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
-    want = 2.0 + 2j * np.pi * f * 10e-3 * (1 - p["d"] + p["d"] * (1 + 1j * f / p["fc"]) ** (-p["b"]))
-    err = np.log(z / want)
-    assert np.max(np.abs(err.real)) * 20 / np.log(10) < 0.1 and np.degrees(np.max(np.abs(err.imag))) < 1.0
+    _, _, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n", p, 1e3, 1e7, f)
+    _assert_within(z, 2.0 + 2j * np.pi * f * 10e-3 * (1 - p["d"] + p["d"] * (1 + 1j * f / p["fc"]) ** (-p["b"])))
 
 
 def test_skin_causal_form_with_a_level_is_realised_by_a_passive_ladder():
     """The realised ladder against ``R/c (1 + a (j f/f_ref)^b) + j w L`` written out here (``c`` the free level)."""
-    net = parse_netlist("* one winding section\nR1 n1 x 2.0\nL1 x 0 100u\n")
-    groups = winding_groups(net, ["n1"])
     eff = SkinEffect(form="causal", f_ref=1e3, f_max=1e7, level=True)
     assert [q.name for q in eff.parameters] == ["a", "b", "c"]
     p = {"a": 0.3, "b": 0.5, "c": 2.0}
-    realised, note = eff.realise(net, groups, p, 1e3, 1e7)
-    assert "passive" in note
-    assert all(e.value > 0 for e in realised.elements if e.kind in "RL")
     f = np.logspace(3, 7, 60)
-    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
-    want = 2.0 / 2.0 * (1 + 0.3 * (1j * f / 1e3) ** 0.5) + 2j * np.pi * f * 100e-6
-    err = np.log(z / want)
-    assert np.max(np.abs(err.real)) * 20 / np.log(10) < 0.1 and np.degrees(np.max(np.abs(err.imag))) < 1.0
+    _, note, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 100u\n", p, 1e3, 1e7, f)
+    assert "passive" in note
+    _assert_within(z, 2.0 / 2.0 * (1 + 0.3 * (1j * f / 1e3) ** 0.5) + 2j * np.pi * f * 100e-6)
     assert "c = 2" in eff.formula(p)
 
 
 def test_magnetising_thesis_form_with_a_level_follows_its_inductance():
     """The realised inductance against ``a f^(-b) L_linear`` (thesis 2.5) with ``a = k f_ref^b`` written out here."""
-    net = parse_netlist("* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n")
-    groups = winding_groups(net, ["n1"])
     eff = MagnetisingInductance(form="thesis", f_ref=10.0, f_max=1e5, level=True)
     assert [q.name for q in eff.parameters] == ["b", "k"]
     p = {"b": 0.05, "k": 1.5}
-    realised, _ = eff.realise(net, groups, p, 10.0, 1e5)
-    assert all(e.value > 0 for e in realised.elements if e.kind in "RL")
     f = np.logspace(1.5, 4.5, 40)
-    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
+    _, _, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n", p, 10.0, 1e5, f)
     want = 1.5 * 10.0**0.05 * f**-0.05 * 10e-3
     assert np.max(np.abs(z.imag / (2 * np.pi * f) / want - 1)) < 0.05
     assert "k = 1.5" in eff.formula(p)
