@@ -81,12 +81,12 @@ def test_skin_relaxation_form_is_realised_by_a_passive_ladder():
 
 
 def test_magnetising_relaxation_form_is_realised_by_a_passive_ladder():
-    """The realised inductor's impedance against ``j w L [1 - d + d (1 + j f/f_c)^(-b)] + R`` written out here."""
+    """The realised inductor's impedance against ``j w L [1 - d + d (1 + (j f/f_c)^a)^(-b)] + R`` written out here."""
     eff = MagnetisingInductance(form="relaxation", f_ref=1e3, f_max=1e7)
-    p = {"d": 0.4, "b": 0.7, "fc": 2e5}
+    p = {"d": 0.4, "b": 0.7, "a": 0.75, "fc": 2e5}
     f = np.logspace(3, 7, 60)
     _, _, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n", p, 1e3, 1e7, f)
-    _assert_within(z, 2.0 + 2j * np.pi * f * 10e-3 * (1 - p["d"] + p["d"] * (1 + 1j * f / p["fc"]) ** (-p["b"])))
+    _assert_within(z, 2.0 + 2j * np.pi * f * 10e-3 * (1 - p["d"] + p["d"] * (1 + (1j * f / p["fc"]) ** p["a"]) ** (-p["b"])))
 
 
 def test_skin_causal_form_with_a_level_is_realised_by_a_passive_ladder():
@@ -122,7 +122,7 @@ def test_levels_only_with_a_design_prior():
     assert [q.name for q in MagnetisingInductance(form="thesis", f_ref=1e3).parameters] == ["b"]
     assert [q.name for q in MagnetisingInductance(form="causal", f_ref=1e3).parameters] == ["b"]
     assert [q.name for q in MagnetisingInductance(form="relaxation", f_ref=1e3, level=True).parameters] == [
-        "d", "b", "fc"]
+        "d", "b", "a", "fc"]
 
 
 def test_core_group_causal_form_only_with_levels():

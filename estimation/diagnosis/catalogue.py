@@ -42,8 +42,10 @@ low frequency and keep no level.
     ``L(f_ref) = k L_linear``; ``k = 1`` unless the level is free); causal:
     ``k L (j f/f_ref)^(-b)`` (``k = 1`` unless the level is free; its loss
     angle is ``b pi/2``); relaxation (the core's permeability dispersing
-    above a corner, Davidson-Cole): ``L [1 - d + d (1 + j f/f_c)^(-b)]``,
-    ``L`` below the corner, ``L (1 - d)`` far above it. Applied to the
+    above a corner, Havriliak-Negami):
+    ``L [1 - d + d (1 + (j f/f_c)^a)^(-b)]``, ``L`` below the corner,
+    ``L (1 - d)`` far above it; ``a`` widens the dispersion symmetrically
+    (Cole-Cole for ``b = 1``), ``b`` skews it (Davidson-Cole for ``a = 1``). Applied to the
     winding inductances with their mutuals (``M_ij`` scales with
     ``sqrt(L_i L_j)``), and (group ``core``) to the core loop's inductance
     ``Lc`` of ``Lc || Rc``: lossless (2.5) always, the causal form only with
@@ -411,11 +413,12 @@ class MagnetisingInductance(Effect):
     def __post_init__(self) -> None:
         self.cause = "magnetising-inductance"
         self.thesis_eq = "2.5"
-        if self.form == "relaxation":  # Davidson-Cole dispersion of the core's permeability
+        if self.form == "relaxation":  # Havriliak-Negami dispersion of the core's permeability
             lo, hi = _corner_range(self)
             self.parameters = [
                 ExtraParameter("d", 1e-3, 0.95, (0.05, 0.3), description="fall of L above the corner (x L)"),
-                ExtraParameter("b", 0.2, 1.0, (0.5,), log=False, description="spread exponent"),
+                ExtraParameter("b", 0.2, 1.0, (0.5,), log=False, description="asymmetry exponent"),
+                ExtraParameter("a", 0.3, 1.0, (0.8,), log=False, description="width exponent"),
                 ExtraParameter("fc", lo, hi, _corner_starts(self), description="corner frequency, Hz"),
             ]
             return
@@ -448,7 +451,7 @@ class MagnetisingInductance(Effect):
             return magnetising_inductance(f[None, :], 1.0, k * self.f_ref ** b, b).astype(complex)
         if self.form == "relaxation":
             d = _p(p, "d")
-            return 1 - d + d * (1 + 1j * f[None, :] / _p(p, "fc")) ** (-_p(p, "b"))
+            return 1 - d + d * (1 + (1j * f[None, :] / _p(p, "fc")) ** _p(p, "a")) ** (-_p(p, "b"))
         k = _p(p, "k") if "k" in p else 1.0
         return k * (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
 
@@ -476,8 +479,8 @@ class MagnetisingInductance(Effect):
             return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
                     f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
         if self.form == "relaxation":
-            return (f"L(f) = L [1 - d + d (1 + j f/f_c)^(-b)] (Davidson-Cole), d = {p['d']:.4g}, b = {p['b']:.4g}, "
-                    f"f_c = {p['fc']:.4g} Hz")
+            return (f"L(f) = L [1 - d + d (1 + (j f/f_c)^a)^(-b)] (Havriliak-Negami), d = {p['d']:.4g}, "
+                    f"a = {p['a']:.4g}, b = {p['b']:.4g}, f_c = {p['fc']:.4g} Hz")
         if "k" in p:
             return f"Z_L(f) = j w L k (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}, k = {p['k']:.4g}"
         return f"Z_L(f) = j w L (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}"
