@@ -424,7 +424,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                  f"dBIC {baseline.bic - pair.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
 
     # ---- forward selection
-    current, chosen, steps = baseline, [], []
+    current, chosen, steps, deferred = baseline, [], [], set()
     while pool and len(chosen) < max_causes:
         if ctx.settled(current):
             _log("cost at the noise floor: no further cause", progress)
@@ -471,6 +471,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                 failed.append({"cause": best.cause, "cost": best.cost,
                                "reason": f"held-out gain {held:.3f} below {need} (alternate points)"})
                 pool.pop(best.cause if best.cause in pool else new_cause)
+                deferred.add(new_cause)  # tried again once another cause is named: it may hold with it
                 continue
         for other in new_causes[:-1] if len(new_causes) > 1 else []:  # a pair: the effect named with the section
             steps.append({"cause": other, "joint": True, "gain": 1 - best.objective / current.objective,
@@ -488,6 +489,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         _log(f"step {len(chosen)}: {new_cause} (gain {steps[-1]['gain']:.3f}, dBIC {steps[-1]['delta_bic']:.1f})",
              progress)
         remaining = [c for c in pool if c not in chosen and "+" not in c]
+        remaining += sorted(c for c in deferred if c in results and c not in chosen and c not in remaining)
+        deferred.clear()
         pool = {}
         if len(chosen) >= max_causes or ctx.settled(current):
             continue

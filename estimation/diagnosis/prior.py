@@ -72,19 +72,37 @@ class DesignPrior:
         touches: those (the elements whose nodes differ from the design's,
         new elements, and the resistors and inductors joined to a changed
         inductor) carry no prior; every other design value does.
+
+        A section that ended at ground and is split no longer does: its
+        series capacitance was a capacitance to ground at its start node,
+        in parallel with (and indistinguishable from) the node's own, and
+        the split shares it out anew. The capacitances to ground at that
+        node carry no prior either.
         """
         names = set(self.design)
         if not self.topology:
             return names
-        changed = set()
+        changed, opened = set(), set()
         for e in circuit.elements:
             key = e.name.lower()
             if key in self.topology and tuple(e.nodes) != self.topology[key]:
                 changed.add(key)
+                if e.kind == "L" and GROUND in self.topology[key] and GROUND not in e.nodes:
+                    opened |= set(self.topology[key]) - {GROUND}
         nodes = {n for e in circuit.elements if e.name.lower() in changed and e.kind == "L" for n in e.nodes}
         nodes.discard(GROUND)
         for e in circuit.elements:
             if e.kind in "RL" and nodes & set(e.nodes):
+                changed.add(e.name.lower())
+        # the start node of a split section that ended at ground: through its series resistor, if any
+        start = set(opened)
+        for e in circuit.elements:
+            design_nodes = self.topology.get(e.name.lower(), ())
+            if e.kind == "R" and opened & set(design_nodes):
+                start |= set(design_nodes) - {GROUND}
+        for e in circuit.elements:
+            design_nodes = self.topology.get(e.name.lower(), ())
+            if e.kind == "C" and GROUND in design_nodes and start & set(design_nodes) and tuple(e.nodes) == design_nodes:
                 changed.add(e.name.lower())
         return names - changed
 

@@ -312,6 +312,15 @@ class Unmerged:
                 steps.update({self.first["C"]: np.log((1 + cr) / 2), self.second["C"]: np.log((1 + 1 / cr) / 2)})
             if self.shunt:
                 steps[self.shunt] = np.log(cg)
+            if self.first["C"] and self.first["C"] != self.own_c and self.shunt:
+                # a section that ended at ground: the capacitance added across its first half, in series with the
+                # new node's, was part of the start node's capacitance to ground (the inverse of merged_back)
+                ground = [e.name for e in c.of_kind("C") if set(e.nodes) == {self._start, GROUND}]
+                total = sum(float(v[n.lower()]) for n in ground)
+                c1, c2 = float(v[self.first["C"].lower()]), float(v[self.shunt.lower()]) * cg
+                if total > 0:
+                    for n in ground:
+                        steps[n] = np.log(max(1 - c1 * c2 / (c1 + c2) / total, 0.1))
             for name, step in steps.items():
                 if name.lower() in col:
                     x[col[name.lower()]] = step
