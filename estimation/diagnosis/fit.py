@@ -57,6 +57,9 @@ CONTINUATION = (0.1, 0.03, 0.01)
 #: ... and from a decade, for starts whose resonances are 10-20 % off (the seeds of a new section): their broad shape
 #: is drawn together first (a schedule starting at 0.1 decade leaves such a start hundreds of times above the noise).
 WIDE_CONTINUATION = (1.0, 0.5, 0.25, 0.1, 0.05)
+#: ... and a second schedule from three decades: which seed reaches the noise through which schedule is erratic (the
+#: paths branch at every resonance), so a seed missed by one schedule may be found by the other.
+WIDER_CONTINUATION = (3.0, 1.0, 0.5, 0.25, 0.1, 0.05)
 
 
 class DiagnosisError(ValueError):

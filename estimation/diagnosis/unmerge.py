@@ -343,7 +343,8 @@ def unmerged_candidates(nominal: Circuit, ports: Sequence[str]) -> list[Unmerged
 def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np.ndarray], nominal: Circuit,
                     ports: Sequence[str], tail: np.ndarray, by_resonance: int = 2, by_cost: int = 0,
                     screen_nfev: int = 15, max_nfev: int = 80, coupling_nfev: int = 60, free_couplings: bool = True,
-                    resolved: Mapping[str, np.ndarray] | None = None, all_seeds: bool = True, seed_nfev: int = 8):
+                    resolved: Mapping[str, np.ndarray] | None = None, all_seeds: bool = True, seed_nfev: int = 8,
+                    schedules: Sequence[Sequence[float]] | None = None, good_enough: float = 0.0):
     """Fit every un-merged candidate from its best seeds; the best fit, its candidate and the fit to merge back.
 
     The seeds are fitted with the couplings as designed (the baseline's
@@ -376,6 +377,10 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         evaluations per stage), the prior out of the smoothed stages; the
         best of those gets its final fit too, and the better of the two
         final fits is returned.
+    schedules : sequence of sequences of float, optional
+        Smoothing schedules (decades) of those fits, tried in turn until a
+        seed's objective reaches ``good_enough`` (default: one,
+        :data:`.fit.WIDE_CONTINUATION`).
     free_couplings : bool
         Refit the best with the couplings the split touches free.
     resolved : mapping, optional
@@ -390,6 +395,8 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
     from .fit import WIDE_CONTINUATION, DiagnosisError
 
     screened, continued = [], []
+    schedules = list(schedules or [WIDE_CONTINUATION])
+    fits = []
     for um in unmerged_candidates(nominal, ports):
         try:
             fit = make_fit(um.candidate.circuit, ())
@@ -409,18 +416,21 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
             except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
                 continue
             screened.append((res.cost, um, fit, res))
-        if not all_seeds:
-            continue
-        fitted = []
-        for i in range(len(rows)):  # which seed leads to the measured resonances shows only once it is fitted
-            try:
-                # continued through smoothed errors: the seeds' resonances are tens of per cent off the measured ones
-                res = fit.fit_continued(rows[i], stages=WIDE_CONTINUATION, stage_nfev=seed_nfev, max_nfev=seed_nfev,
-                                        tol=1e-6, prior_in_stages=False)
-            except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
-                continue
-            fitted.append((res.cost, um, fit, res))
-        continued += sorted(fitted, key=lambda t: t[0])[:by_resonance + by_cost]
+        fits.append((um, fit, rows))
+    for stages in schedules if all_seeds else []:
+        for um, fit, rows in fits:
+            fitted = []
+            for i in range(len(rows)):  # which seed leads to the measured resonances shows only once it is fitted
+                try:
+                    # continued through smoothed errors: the seeds' resonances are tens of per cent off the measured
+                    res = fit.fit_continued(rows[i], stages=stages, stage_nfev=seed_nfev, max_nfev=seed_nfev, tol=1e-6,
+                                            prior_in_stages=False)
+                except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
+                    continue
+                fitted.append((res.cost, um, fit, res))
+            continued += sorted(fitted, key=lambda t: t[0])[:by_resonance + by_cost]
+        if continued and min(t[3].objective for t in continued) <= good_enough:
+            break
     found = [_finish(min(group, key=lambda t: t[0]), make_fit, max_nfev, coupling_nfev, free_couplings)
              for group in (screened, continued) if group]
     return min(found, key=lambda t: t[0].objective) if found else None
