@@ -61,10 +61,11 @@ def _one_port_effects(f: np.ndarray, scale: float) -> list:
         [cat.SkinEffect(form="causal", f_ref=f[0], level=True)],
         [cat.MagnetisingInductance(form="causal", f_ref=f[0], level=True)],
         [cat.MagnetisingInductance(form="thesis", f_ref=f[0], level=True)],
+        [cat.MagnetisingInductance(form="relaxation", f_ref=f[0], f_max=f[-1], level=True)],
     ]
 
 
-@pytest.mark.parametrize("which", range(13))
+@pytest.mark.parametrize("which", range(14))
 def test_one_port_circuit_columns_match_central_differences(which):
     circuit, cfg, f, data = _one_port()
     scale = float(np.median(np.abs(data["Zin"])))

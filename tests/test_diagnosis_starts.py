@@ -82,7 +82,7 @@ def test_skin_relaxation_form_is_realised_by_a_passive_ladder():
 
 def test_magnetising_relaxation_form_is_realised_by_a_passive_ladder():
     """The realised inductor's impedance against ``j w L [1 - d + d (1 + (j f/f_c)^a)^(-b)] + R`` written out here."""
-    eff = MagnetisingInductance(form="relaxation", f_ref=1e3, f_max=1e7)
+    eff = MagnetisingInductance(form="relaxation", f_ref=1e3, f_max=1e7, level=True)
     p = {"d": 0.4, "b": 0.7, "a": 0.75, "fc": 2e5}
     f = np.logspace(3, 7, 60)
     _, _, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n", p, 1e3, 1e7, f)
@@ -115,7 +115,7 @@ def test_magnetising_thesis_form_with_a_level_follows_its_inductance():
 
 def test_levels_only_with_a_design_prior():
     """Without ``level`` the forms keep their pinned levels (``c = 1``, ``k = 1``); the thesis skin form and the
-    relaxation forms never get one."""
+    relaxation forms never get one; the magnetising relaxation gets its width exponent ``a`` with a prior only."""
     assert [q.name for q in SkinEffect(form="causal", f_ref=1e3).parameters] == ["a", "b"]
     assert [q.name for q in SkinEffect(form="relaxation", f_ref=1e3, level=True).parameters] == ["a", "b", "fc"]
     assert [q.name for q in SkinEffect(form="thesis", f_ref=1e3, level=True).parameters] == ["a", "b", "f0"]
@@ -123,6 +123,7 @@ def test_levels_only_with_a_design_prior():
     assert [q.name for q in MagnetisingInductance(form="causal", f_ref=1e3).parameters] == ["b"]
     assert [q.name for q in MagnetisingInductance(form="relaxation", f_ref=1e3, level=True).parameters] == [
         "d", "b", "a", "fc"]
+    assert [q.name for q in MagnetisingInductance(form="relaxation", f_ref=1e3).parameters] == ["d", "b", "fc"]
 
 
 def test_core_group_causal_form_only_with_levels():

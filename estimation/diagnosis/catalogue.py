@@ -22,7 +22,11 @@ beyond the tolerance. Without a prior a level and the circuit values are not
 separable, and it is pinned (``c = 1``, ``a = f_ref^b``, ``k = 1``). The
 thesis skin form (2.6) keeps ``c = 1`` (with ``c`` free it converged to a
 worse fit on a design case); the relaxation forms equal the circuit value at
-low frequency and keep no level.
+low frequency and keep no level. With a prior the magnetising relaxation also
+gets its width exponent (Havriliak-Negami instead of Davidson-Cole): the
+anchored circuit values cannot bend to a dispersion wider than the form's,
+while without them the wider form also takes a conductor's eddy losses (on a
+measured short-circuit impedance it displaced the skin effect).
 
 ``skin-effect``
     thesis (2.6): ``R(f) = R_linear / c [1 + a (f/f0 - 1)^b]`` for
@@ -45,7 +49,8 @@ low frequency and keep no level.
     above a corner, Havriliak-Negami):
     ``L [1 - d + d (1 + (j f/f_c)^a)^(-b)]``, ``L`` below the corner,
     ``L (1 - d)`` far above it; ``a`` widens the dispersion symmetrically
-    (Cole-Cole for ``b = 1``), ``b`` skews it (Davidson-Cole for ``a = 1``). Applied to the
+    (Cole-Cole for ``b = 1``), ``b`` skews it (Davidson-Cole for ``a = 1``,
+    the form without a design prior). Applied to the
     winding inductances with their mutuals (``M_ij`` scales with
     ``sqrt(L_i L_j)``), and (group ``core``) to the core loop's inductance
     ``Lc`` of ``Lc || Rc``: lossless (2.5) always, the causal form only with
@@ -418,9 +423,8 @@ class MagnetisingInductance(Effect):
             self.parameters = [
                 ExtraParameter("d", 1e-3, 0.95, (0.05, 0.3), description="fall of L above the corner (x L)"),
                 ExtraParameter("b", 0.2, 1.0, (0.5,), log=False, description="asymmetry exponent"),
-                ExtraParameter("a", 0.3, 1.0, (0.8,), log=False, description="width exponent"),
-                ExtraParameter("fc", lo, hi, _corner_starts(self), description="corner frequency, Hz"),
-            ]
+            ] + ([ExtraParameter("a", 0.3, 1.0, (0.8,), log=False, description="width exponent")] if self.level else [])
+            self.parameters.append(ExtraParameter("fc", lo, hi, _corner_starts(self), description="corner frequency, Hz"))
             return
         lo = 0.0 if self.form == "thesis" else 1e-4
         self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
@@ -451,7 +455,8 @@ class MagnetisingInductance(Effect):
             return magnetising_inductance(f[None, :], 1.0, k * self.f_ref ** b, b).astype(complex)
         if self.form == "relaxation":
             d = _p(p, "d")
-            return 1 - d + d * (1 + (1j * f[None, :] / _p(p, "fc")) ** _p(p, "a")) ** (-_p(p, "b"))
+            a = _p(p, "a") if "a" in p else 1.0
+            return 1 - d + d * (1 + (1j * f[None, :] / _p(p, "fc")) ** a) ** (-_p(p, "b"))
         k = _p(p, "k") if "k" in p else 1.0
         return k * (1j * f[None, :] / self.f_ref) ** (-_p(p, "b"))
 
@@ -479,6 +484,9 @@ class MagnetisingInductance(Effect):
             return (f"L(f) = a f^(-b) L_linear (thesis 2.5), b = {p['b']:.4g}, a = f_ref^b = "
                     f"{self.f_ref ** p['b']:.4g} (f_ref = {self.f_ref:.4g} Hz)")
         if self.form == "relaxation":
+            if "a" not in p:
+                return (f"L(f) = L [1 - d + d (1 + j f/f_c)^(-b)] (Davidson-Cole), d = {p['d']:.4g}, b = {p['b']:.4g}, "
+                        f"f_c = {p['fc']:.4g} Hz")
             return (f"L(f) = L [1 - d + d (1 + (j f/f_c)^a)^(-b)] (Havriliak-Negami), d = {p['d']:.4g}, "
                     f"a = {p['a']:.4g}, b = {p['b']:.4g}, f_c = {p['fc']:.4g} Hz")
         if "k" in p:
