@@ -69,8 +69,9 @@ from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
 from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
 from .evidence import (band_table, localise, noise_floor, noise_variance, noise_weights, resonance_comparison,
                        unexplained_bands)
-from .fit import (WIDE_CONTINUATION, WIDER_CONTINUATION, DiagnosisError, FitResult, FrequencyFit, configuration_ports,
-                  group_names, significant)
+from .fit import (CANDIDATE_FAILURES, WIDE_CONTINUATION, WIDER_CONTINUATION, DiagnosisError, FitResult, FrequencyFit,
+                  configuration_ports, current_nc, group_names, significant)
+from .drift import GROSS_DRIFT, relaxed_drift
 from .holdout import held_out_gain
 from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from .forms import rechoose_forms
@@ -93,9 +94,6 @@ WIDE_SEED_NFEV = 20
 #: ... and, with every measured resonance already in the model without it, named only if its fit comes within this
 #: factor of ``NOISE_MARGIN`` times the noise floor.
 STRUCTURAL_FLOOR = 2.0
-#: A fit that reaches the noise floor but moves a value more than this many tolerances from the design
-#: (``|ln(v/d)| > GROSS_DRIFT ln(1 + tolerance)``) is not an explanation: causes are sought from the design values.
-GROSS_DRIFT = 2.0
 
 
 @dataclass
@@ -564,7 +562,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                      noise=floor, failed=failed)
     final = extended or baseline
     diag.tolerance = float(tolerance) if prior is not None else float("inf")
-    diag.drift = _relaxed_drift(ctx, final, progress)
+    diag.drift = relaxed_drift(ctx, final, lambda m: _log(m, progress))
     diag.baseline_drift = ctx.drift(baseline)
     if diag.drift:
         _log("values beyond the design tolerance in the final model: "
@@ -701,7 +699,7 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
 
 #: What a candidate's fit may raise when its parameters make the network degenerate (e.g. a node left with
 #: only inductors): the candidate is dropped, the diagnosis goes on.
-_CANDIDATE_FAILURES = (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError)
+_CANDIDATE_FAILURES = CANDIDATE_FAILURES
 
 
 def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effect], must_beat: float,
@@ -915,79 +913,6 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
     return current, chosen, steps
 
 
-#: Most values freed from the prior when the drift is relaxed (:func:`_relaxed_drift`).
-MAX_FREED = 4
-#: Most drifted values (the furthest off) checked against their design values; the others are not reported.
-MAX_HELD = 6
-#: A drifted value is reported only if holding it at the edge of the tolerance worsens the BIC by this much ("very
-#: strong").
-DRIFT_MIN_DBIC = 10.0
-
-
-def _relaxed_drift(ctx: _Context, final: FitResult, progress: bool) -> list[dict[str, Any]]:
-    """The values off the design in the final model, each freed from the prior in turn.
-
-    The prior pulls a value that is really off the design back towards it,
-    and the others then move to make up for it. The value furthest beyond the
-    tolerance is freed (its prior removed) and the model refitted; then the
-    next, while any is left more than ``GROSS_DRIFT`` tolerances off (at most
-    ``MAX_FREED``).
-    What stays beyond it after that is the drift reported, with the refitted
-    values, and of those only the values the data need beyond the tolerance:
-    held at the tolerance's edge on its side (the others refitted), the fit
-    must lose ``DRIFT_MIN_DBIC`` (the
-    ``MAX_HELD`` furthest off are checked). The
-    named causes and the gain are not changed by this.
-    """
-    if ctx.prior is None:
-        return []
-    drift = ctx.drift(final)
-    if drift:
-        _log("beyond the tolerance before relaxing: " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift),
-             progress)
-    current, freed = final, []
-    while len(freed) < MAX_FREED:
-        # a value just beyond the tolerance is within the prior's reach: freeing it only lets it wander
-        todo = [d for d in drift if d["name"].lower() not in freed and d["sigmas"] > GROSS_DRIFT]
-        if not todo:
-            break
-        freed.append(todo[0]["name"].lower())
-        loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
-        try:
-            fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
-            tail = current.x[current_nc(current):]
-            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-7)
-        except _CANDIDATE_FAILURES:
-            break
-        current = trial
-        drift = ctx.drift(current)
-    if freed:
-        _log(f"drift relaxed: {', '.join(freed)} freed from the prior; cost {final.cost:.4g} -> {current.cost:.4g}",
-             progress)
-    # a value the data do not need beyond the tolerance is not reported: held at the edge of the tolerance on its
-    # side (design x (1 + tolerance) or / (1 + tolerance); the others refitted), the fit must lose DRIFT_MIN_DBIC
-    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
-    kept = []
-    for d in drift[:MAX_HELD]:
-        name = d["name"]
-        try:
-            edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
-            held = current.fitted_circuit().with_values({name: edge})
-            fit = ctx.fit(held, current.effects, fixed=[name], prior=loose, couplings=current.couplings)
-            tail = current.x[current_nc(current):]
-            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=40, tol=1e-6)
-        except _CANDIDATE_FAILURES:
-            kept.append(d)
-            continue
-        d["delta_bic"] = float(trial.bic - current.bic)
-        if d["delta_bic"] >= DRIFT_MIN_DBIC:
-            kept.append(d)
-        else:
-            _log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
-                 f"(dBIC {d['delta_bic']:.1f} at its edge): not reported", progress)
-    return kept
-
-
 def _topology(circuit: Circuit) -> list[tuple[str, str, tuple[str, ...]]]:
     """Element names, kinds and nodes (values left out)."""
     return [(e.name.lower(), e.kind, tuple(e.nodes)) for e in circuit.elements]
@@ -1045,11 +970,6 @@ def _design_x(ctx: _Context, fit: FrequencyFit) -> np.ndarray | None:
         return None
     lo, hi = fit.bounds()
     return np.clip(x, lo[: fit.nc] + 1e-9, hi[: fit.nc] - 1e-9)
-
-
-def current_nc(r: FitResult) -> int:
-    """Number of circuit values in a fit's parameter vector."""
-    return r.x.size - sum(len(e.parameters) for e in r.effects)
 
 
 def load_baseline(model_name: str | None) -> Model | None:

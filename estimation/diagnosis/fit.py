@@ -39,6 +39,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from pris_cosim.circuit import Circuit
+from pris_cosim.errors import CircuitError
 from pris_cosim.expressions import Expression
 from pris_cosim.models import Configuration
 
@@ -64,6 +65,15 @@ WIDER_CONTINUATION = (3.0, 1.0, 0.5, 0.25, 0.1, 0.05)
 
 class DiagnosisError(ValueError):
     """Input that a diagnosis cannot use (the message says why)."""
+
+
+def current_nc(r: FitResult) -> int:
+    """Number of circuit values in a fit's parameter vector (the effects' parameters follow them)."""
+    return r.x.size - sum(len(e.parameters) for e in r.effects)
+
+
+#: What a fit of a candidate structure may raise (a degenerate network, a failed solve): the candidate is dropped.
+CANDIDATE_FAILURES = (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError)
 
 
 def bic(rss: float, n_residuals: int, n_params: int) -> float:

@@ -1,0 +1,95 @@
+"""Drift: the values of a fitted model off the design, and which of them the data need.
+
+A fit against a design (:mod:`.prior`) may end with values beyond the
+tolerance. The prior pulls a value that is really off back towards the
+design, and the others move to make up for it; this module frees the
+furthest off in turn, then reports only the values that the data need beyond
+the tolerance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from .fit import CANDIDATE_FAILURES, FitResult, current_nc
+
+#: A fit that reaches the noise floor but moves a value more than this many tolerances from the design
+#: (``|ln(v/d)| > GROSS_DRIFT ln(1 + tolerance)``) is not an explanation: causes are sought from the design values.
+GROSS_DRIFT = 2.0
+
+
+#: Most values freed from the prior when the drift is relaxed (:func:`relaxed_drift`).
+MAX_FREED = 4
+#: Most drifted values (the furthest off) checked against their design values; the others are not reported.
+MAX_HELD = 6
+#: A drifted value is reported only if holding it at the edge of the tolerance worsens the BIC by this much ("very
+#: strong").
+DRIFT_MIN_DBIC = 10.0
+
+
+def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> list[dict[str, Any]]:
+    """The values off the design in the final model, each freed from the prior in turn.
+
+    The prior pulls a value that is really off the design back towards it,
+    and the others then move to make up for it. The value furthest beyond the
+    tolerance is freed (its prior removed) and the model refitted; then the
+    next, while any is left more than ``GROSS_DRIFT`` tolerances off (at most
+    ``MAX_FREED``).
+    What stays beyond it after that is the drift reported, with the refitted
+    values, and of those only the values the data need beyond the tolerance:
+    held at the tolerance's edge on its side (the others refitted), the fit
+    must lose ``DRIFT_MIN_DBIC`` (the
+    ``MAX_HELD`` furthest off are checked). The
+    named causes and the gain are not changed by this.
+    """
+    if ctx.prior is None:
+        return []
+    drift = ctx.drift(final)
+    if drift:
+        log("beyond the tolerance before relaxing: " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift),
+             progress)
+    current, freed = final, []
+    while len(freed) < MAX_FREED:
+        # a value just beyond the tolerance is within the prior's reach: freeing it only lets it wander
+        todo = [d for d in drift if d["name"].lower() not in freed and d["sigmas"] > GROSS_DRIFT]
+        if not todo:
+            break
+        freed.append(todo[0]["name"].lower())
+        loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
+        try:
+            fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
+            tail = current.x[current_nc(current):]
+            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-7)
+        except CANDIDATE_FAILURES:
+            break
+        current = trial
+        drift = ctx.drift(current)
+    if freed:
+        _log(f"drift relaxed: {', '.join(freed)} freed from the prior; cost {final.cost:.4g} -> {current.cost:.4g}",
+             progress)
+    # a value the data do not need beyond the tolerance is not reported: held at the edge of the tolerance on its
+    # side (design x (1 + tolerance) or / (1 + tolerance); the others refitted), the fit must lose DRIFT_MIN_DBIC
+    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
+    kept = []
+    for d in drift[:MAX_HELD]:
+        name = d["name"]
+        try:
+            edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
+            held = current.fitted_circuit().with_values({name: edge})
+            fit = ctx.fit(held, current.effects, fixed=[name], prior=loose, couplings=current.couplings)
+            tail = current.x[current_nc(current):]
+            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=40, tol=1e-6)
+        except CANDIDATE_FAILURES:
+            kept.append(d)
+            continue
+        d["delta_bic"] = float(trial.bic - current.bic)
+        if d["delta_bic"] >= DRIFT_MIN_DBIC:
+            kept.append(d)
+        else:
+            _log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
+                 f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
+    return kept
