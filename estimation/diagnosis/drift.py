@@ -50,8 +50,7 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
         return []
     drift = ctx.drift(final)
     if drift:
-        log("beyond the tolerance before relaxing: " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift),
-             progress)
+        log("beyond the tolerance before relaxing: " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift))
     current, freed = final, []
     while len(freed) < MAX_FREED:
         # a value just beyond the tolerance is within the prior's reach: freeing it only lets it wander
@@ -69,8 +68,7 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
         current = trial
         drift = ctx.drift(current)
     if freed:
-        _log(f"drift relaxed: {', '.join(freed)} freed from the prior; cost {final.cost:.4g} -> {current.cost:.4g}",
-             progress)
+        log(f"drift relaxed: {', '.join(freed)} freed from the prior; cost {final.cost:.4g} -> {current.cost:.4g}")
     # a value the data do not need beyond the tolerance is not reported: held at the edge of the tolerance on its
     # side (design x (1 + tolerance) or / (1 + tolerance); the others refitted), the fit must lose DRIFT_MIN_DBIC
     loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
@@ -90,6 +88,6 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
         if d["delta_bic"] >= DRIFT_MIN_DBIC:
             kept.append(d)
         else:
-            _log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
+            log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
                  f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
     return kept
