@@ -73,11 +73,12 @@ class DesignPrior:
         new elements, and the resistors and inductors joined to a changed
         inductor) carry no prior; every other design value does.
 
-        A section that ended at ground and is split no longer does: its
-        series capacitance was a capacitance to ground at its start node,
-        in parallel with (and indistinguishable from) the node's own, and
-        the split shares it out anew. The capacitances to ground at that
-        node carry no prior either.
+        A section that ended at ground and is split with a capacitance added
+        across its first half no longer does: its series capacitance was a
+        capacitance to ground at its start node, in parallel with (and
+        indistinguishable from) the node's own, and the added capacitance
+        (in series with the new node's) takes its share of it. The
+        capacitances to ground at that node then carry no prior either.
         """
         names = set(self.design)
         if not self.topology:
@@ -100,6 +101,8 @@ class DesignPrior:
             design_nodes = self.topology.get(e.name.lower(), ())
             if e.kind == "R" and opened & set(design_nodes):
                 start |= set(design_nodes) - {GROUND}
+        start = {n for n in start if any(e.kind == "C" and e.name.lower() not in self.topology and n in e.nodes
+                                         and GROUND not in e.nodes for e in circuit.elements)}
         for e in circuit.elements:
             design_nodes = self.topology.get(e.name.lower(), ())
             if e.kind == "C" and GROUND in design_nodes and start & set(design_nodes) and tuple(e.nodes) == design_nodes:
