@@ -19,7 +19,9 @@ Steps:
    fitted baseline lacks, or the baseline stays far above the noise, a
    missing section is also sought from the nominal circuit as two whole
    sections seeded at the measured resonances (:mod:`.unmerge`); its two
-   sections merged back refit the baseline.
+   sections merged back refit the baseline. For one-port data that no
+   single cause explains, every seed of every such split is also fitted
+   through smoothed errors (``WIDE_SEED_NFEV`` evaluations a stage).
 3. Forward selection: the cause with the lowest Bayesian information
    criterion ``BIC = N ln(RSS/N) + k ln N`` is named if it beats the
    baseline's BIC by ``min_delta_bic`` (10: "very strong" evidence on Kass and
@@ -34,8 +36,10 @@ Steps:
    (:mod:`.holdout`, refits converged and with the design prior), and one found from the nominal circuit only while a
    measured resonance is still missing from the model or when it brings the
    fit to the noise floor (a split of the design with its couplings free:
-   only within ``UNMERGE_ABOVE_FLOOR`` times it, whatever the resonances). Selection stops when the cost
-   reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`)
+   only within ``UNMERGE_ABOVE_FLOOR`` times it, whatever the resonances); one refused by the held-out check
+   is tried again after the next cause is named. Selection stops when the cost
+   reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`; for one-port data, the lower
+   of that and the floor estimated from the model's residuals, :meth:`_Context.residual_floor`)
    without values moved far off the design, or, once a section was added,
    whatever the values (a new section shares the winding's values out anew).
    A new section sought before any other cause is named frees the tight
