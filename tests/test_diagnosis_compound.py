@@ -56,6 +56,32 @@ def test_missing_section_found_when_the_design_stays_far_above_the_noise():
 
 
 @pytest.mark.slow
+def test_last_sections_merged_and_a_skin_effect_are_named_together():
+    """The design merges the winding's last two sections (the last ends at ground), and a skin effect is hidden.
+
+    The split alone is refused on held-out points (it takes the skin effect's share); it is tried again once the
+    skin effect is named, and the two reach the noise together.
+    """
+    case, d = _diagnose(("missing-section", "skin-effect"), 700)
+    assert case.truth["merged_sections"] == (6, 7) and case.truth["sections"] == 7
+    assert sorted(d.causes) == ["missing-section", "skin-effect"], d.steps
+    assert "section 6 " in d.best.structure, d.best.structure
+    assert d.best.cost <= 1.25 * d.noise["cost"]
+    assert d.drift == [], d.drift
+
+
+@pytest.mark.slow
+def test_missing_section_in_the_middle_of_a_design_all_off_by_ten_percent():
+    """Sections 3 and 4 of seven merged; every split seed starts hundreds of times above the noise, and only the
+    search through every seed of every split (two smoothing schedules) brings one to it."""
+    case, d = _diagnose(("missing-section",), 701)
+    assert case.truth["merged_sections"] == (3, 4)
+    assert d.causes == ["missing-section"], d.steps
+    assert "section 3 " in d.best.structure, d.best.structure
+    assert d.best.cost <= 1.25 * d.noise["cost"]
+
+
+@pytest.mark.slow
 def test_single_skin_effect_reports_no_drift():
     """A value just beyond the tolerance in the final model is not freed to wander off and reported as drift."""
     case, d = _diagnose(("skin-effect",), 701)

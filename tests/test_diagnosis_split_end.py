@@ -1,0 +1,80 @@
+"""A winding's last section split in two: its start node's capacitance to ground is shared out anew.
+
+The last section of a cascade ends at ground, so its series capacitance is
+a capacitance to ground at its start node, in parallel with the node's own.
+A split that adds a capacitance ``Cs`` across the first half and ``Cg`` at the
+new node puts ``Cs Cg / (Cs + Cg)`` (two capacitors in series) where that
+capacitance was; the closed form is written out here.
+"""
+
+import numpy as np
+import pytest
+
+from estimation.diagnosis.fit import FrequencyFit
+from estimation.diagnosis.prior import design_prior
+from estimation.diagnosis.sections import coupling_decay, find_chains, split_section
+from estimation.diagnosis.unmerge import Unmerged
+from pris_cosim.frf import Response
+from pris_cosim.models import Configuration
+from pris_cosim.netlist import parse_netlist
+
+NET = """* three sections, the last one ending at ground
+R1 n1 x1 0.5
+L1 x1 n2 1.5m
+C1 n1 n2 1.2n
+Cg1 n1 0 0.5n
+R2 n2 x2 0.6
+L2 x2 n3 1.4m
+C2 n2 n3 1.3n
+Cg2 n2 0 0.6n
+R3 n3 x3 1.1
+L3 x3 0 4.1m
+C3 n3 0 0.7n
+Cg3 n3 0 0.55n
+K12 L1 L2 0.6
+K13 L1 L3 0.35
+K23 L2 L3 0.6
+"""
+
+
+def _last_split():
+    c = parse_netlist(NET)
+    chain = find_chains(c, ["n1"])[0]
+    return c, chain, Unmerged(c, chain, len(chain.sections) - 1)
+
+
+def _free(circuit):
+    f = np.logspace(3, 6, 60)
+    cfg = [Configuration("default", "n1", (), (Response("Zin"),))]
+    return FrequencyFit(circuit, cfg, f, {"Zin": np.ones(f.size, complex)}).free
+
+
+def test_last_section_seeds_keep_the_start_nodes_capacitance_to_ground():
+    c, _, um = _last_split()
+    cand = um.candidate.circuit
+    added = um.first["C"]
+    mid = next(n for n in cand.element(um.shunt).nodes if n != "0")
+    assert added not in {e.name for e in c.elements} and set(cand.element(added).nodes) == {"n3", mid}
+    free = _free(cand)
+    values = cand.resolve(check=False)
+    design_total = 0.7e-9 + 0.55e-9
+    rows = um.seeds(free, np.zeros(0))
+    checked = 0
+    for row in rows:
+        v = {n.lower(): float(values[n.lower()]) * np.exp(x) for n, x in zip(free, row)}
+        cs, cg = v[added.lower()], v[um.shunt.lower()]
+        total = v["c3"] + v["cg3"] + cs * cg / (cs + cg)
+        if v["c3"] + v["cg3"] > 0.1 * design_total * 1.0001:  # not clipped at a tenth
+            assert total == pytest.approx(design_total, rel=1e-9)
+            checked += 1
+    assert checked >= len(rows) // 2
+
+
+def test_prior_frees_the_start_nodes_capacitance_only_when_a_capacitance_is_added_across_the_first_half():
+    c, chain, um = _last_split()
+    prior = design_prior({e.name: 1.0 for e in c.elements if e.kind in "RLC"}, 0.2, 1e-5, 200, 1, c)
+    freed = set(prior.design) - prior.anchored(um.candidate.circuit)
+    assert {"c3", "cg3", "r3", "l3"} <= freed and not freed & {"c2", "cg2", "c1", "cg1", "r1", "l1"}
+    plain = split_section(c, chain, len(chain.sections) - 1, coupling_decay(c, [chain], c.resolve(check=False)), 1.0)
+    assert not any(e.kind == "C" and "0" not in e.nodes and e.name in plain.new_elements for e in plain.circuit.elements)
+    assert {"c3", "cg3"} <= prior.anchored(plain.circuit)
