@@ -41,10 +41,11 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
     ``MAX_FREED``).
     What stays beyond it after that is the drift reported, with the refitted
     values, and of those only the values the data need beyond the tolerance:
-    held at the tolerance's edge on its side (the others refitted), the fit
-    must lose ``DRIFT_MIN_DBIC`` (the
-    ``MAX_HELD`` furthest off are checked). The
-    named causes and the gain are not changed by this.
+    each freed from the prior (if not freed already) and then held at the
+    tolerance's edge on its side (the others refitted, its own prior left
+    out of both), the fit must lose ``DRIFT_MIN_DBIC`` (the ``MAX_HELD``
+    furthest off are checked). The named causes and the gain are not changed
+    by this.
     """
     if ctx.prior is None:
         return []
@@ -69,25 +70,43 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
         drift = ctx.drift(current)
     if freed:
         log(f"drift relaxed: {', '.join(freed)} freed from the prior; cost {final.cost:.4g} -> {current.cost:.4g}")
-    # a value the data do not need beyond the tolerance is not reported: held at the edge of the tolerance on its
-    # side (design x (1 + tolerance) or / (1 + tolerance); the others refitted), the fit must lose DRIFT_MIN_DBIC
-    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed})
+    # a value the data do not need beyond the tolerance is not reported: freed from the prior, and held at the edge
+    # of the tolerance on its side (design x (1 + tolerance) or / (1 + tolerance); the others refitted, its own
+    # prior left out of both), the fit must lose DRIFT_MIN_DBIC. A value not freed above is freed for this check
+    # (the prior held it near the tolerance while the others made up for it), and reported with its freed value.
     kept = []
+    tail = current.x[current_nc(current):]
     for d in drift[:MAX_HELD]:
         name = d["name"]
+        loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items()
+                                           if k not in freed and k != name.lower()})
         try:
+            free_fit = current
+            if name.lower() not in freed:
+                fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
+                free_fit = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60,
+                                   tol=1e-7)
+                moved = ctx.prior.drift({name: free_fit.values[name]})
+                if not moved:
+                    log(f"{name}: x{d['ratio']:.3g} off the design, back within the tolerance once freed: "
+                        "not reported")
+                    continue
+                d = moved[0]
             edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
-            held = current.fitted_circuit().with_values({name: edge})
+            held = free_fit.fitted_circuit().with_values({name: edge})
             fit = ctx.fit(held, current.effects, fixed=[name], prior=loose, couplings=current.couplings)
-            tail = current.x[current_nc(current):]
-            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=40, tol=1e-6)
+            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), free_fit.x[current_nc(free_fit):]])[None],
+                            grid=False, max_nfev=40, tol=1e-6)
+            # against the freed fit with the same prior (its own value's term left out)
+            ref = ctx.fit(free_fit.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
+            ref_r = ref.result(np.concatenate([np.zeros(ref.nc), free_fit.x[current_nc(free_fit):]]))
         except CANDIDATE_FAILURES:
             kept.append(d)
             continue
-        d["delta_bic"] = float(trial.bic - current.bic)
+        d["delta_bic"] = float(trial.bic - min(ref_r.bic, free_fit.bic if name.lower() in freed else np.inf))
         if d["delta_bic"] >= DRIFT_MIN_DBIC:
             kept.append(d)
         else:
             log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
-                 f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
+                f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
     return kept
