@@ -247,7 +247,8 @@ class _Context:
         """No further cause is sought after ``r``: it fits to the noise floor (:meth:`residual_floor`) without moving
         any value more than ``GROSS_DRIFT`` tolerances, or it has a new section (which shares the winding's values out
         anew, so values off the design are its own) and fits to the noise floor."""
-        if r.objective > NOISE_MARGIN * self.residual_floor(r):
+        # at or below the data's own floor (an overestimate on a resonant winding) the fit is at the noise anyway
+        if r.objective > max(NOISE_MARGIN * self.residual_floor(r), self.floor):
             return False
         return bool(r.structure) or not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
 
