@@ -38,8 +38,8 @@ Steps:
    fit to the noise floor (a split of the design with its couplings free:
    only within ``UNMERGE_ABOVE_FLOOR`` times it, whatever the resonances); one refused by the held-out check
    is tried again after the next cause is named. Selection stops when the cost
-   reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`; for one-port data, the lower
-   of that and the floor estimated from the model's residuals, :meth:`_Context.residual_floor`)
+   reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`; for one-port data also
+   ``NOISE_MARGIN`` times the floor estimated from the model's residuals, :meth:`_Context.residual_floor`)
    without values moved far off the design, or, once a section was added,
    whatever the values (a new section shares the winding's values out anew).
    A new section sought before any other cause is named frees the tight
