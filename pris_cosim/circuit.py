@@ -16,6 +16,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Any, Union
 
 import numpy as np
@@ -82,7 +83,7 @@ class Parameter:
     unit: str = ""
     description: str = ""
 
-    @property
+    @cached_property
     def key(self) -> str:
         return self.name.lower()
 

@@ -854,8 +854,9 @@ def _single_causes(ctx: _Context, todo: Sequence[str], baseline: FitResult, prog
             res = _fit_missing_section(ctx, baseline, [], must_beat=baseline.objective)
             # the structures also from the baseline's optimum nearest the given values (:func:`fit_multistart`):
             # a split of a better-fitting but more distorted optimum can stop far above the split of the other
+            # (not once another cause explains the data to the noise: the split then only has to be ranked)
             alt = getattr(baseline, "alternative", None)
-            if alt is not None:
+            if alt is not None and not any(ctx.explained(r) for r in results.values()):
                 other = _fit_missing_section(ctx, alt, [], must_beat=baseline.objective)
                 if other is not None and (res is None or other.objective < res.objective):
                     res = other

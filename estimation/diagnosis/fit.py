@@ -376,8 +376,11 @@ class FrequencyFit:
         """Model responses for a population of parameter vectors, shape ``(P, F)`` per response."""
         X = np.atleast_2d(np.asarray(X, float))
         P, F = X.shape[0], self.f.size
-        uniq, inv = np.unique(X[:, : self.nc], axis=0, return_inverse=True)
-        inv = np.ravel(inv)
+        if P == 1:
+            uniq, inv = X[:, : self.nc], np.zeros(1, int)
+        else:
+            uniq, inv = np.unique(X[:, : self.nc], axis=0, return_inverse=True)
+            inv = np.ravel(inv)
         T, values = self._transfer(uniq)
         if uniq.shape[0] != P or np.any(inv != np.arange(P)):  # np.unique sorts the rows: back to X's order
             T = [t[inv] for t in T]
