@@ -500,6 +500,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                         f"a first cause with free couplings that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise",
                         "a new section with its couplings free named first, and the fit with it stays far above "
                         "the noise (free couplings take the share of a frequency-dependent effect)")
+                deferred.add(new_cause)  # not first: tried again once another cause is named
                 continue
             if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
                     and not missing_modes(f, data, current.predicted, ctx.resolved)):
@@ -721,7 +722,7 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     tail = base.x[current_nc(base):] if effects else np.zeros(0)
     staged = []
     for cand in section_candidates(circuit, ports):
-        if effects:  # after a frequency-dependent cause, a section with free couplings would only take its rest
+        if effects and ctx.one_port:  # after a frequency-dependent cause, a section with free couplings would only take its rest
             cand.couplings = []
         try:
             whole = ctx.fit(cand.circuit, effects, couplings=cand.couplings)
