@@ -7,8 +7,9 @@ constant values of the baseline's elements absorb (``target="truth"``). This mod
 values free in log scale, couplings as given) to the truth's responses
 without noise, using only :mod:`refsolver` and :func:`scipy.optimize.least_squares`
 (no code of the diagnosis), from the baseline's values, from the exact
-merge of the truth's sections (the baseline before its jitter) and from
-twelve random starts around the merge (a local fit from one start can stop in a
+merge of the truth's sections (the baseline before its jitter), for an
+effect (``target="truth"``) from the truth's own constant values when it
+has the baseline's structure, and from twelve random starts around the merge (a local fit from one start can stop in a
 poor optimum and call a case detectable that is not).
 
 Criterion: the missing section is *undetectable* when the best fit's mean
@@ -90,6 +91,13 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
     starts = [(case.nets["merged"], zero)]
     if case.nets["baseline"].elements != case.nets["merged"].elements:
         starts.append((case.nets["baseline"], zero))
+    # the truth's own constant values (as ratios to the merge, so the box stays the same), where the truth has the
+    # baseline's structure (its effects left out)
+    sections = case.nets.get("sections")
+    if target == "truth" and sections is not None and [e[0] for e in sections.elements if e[0][0].upper() in "RLC"] \
+            == names:
+        starts.append((case.nets["merged"], np.array([np.log(sections.get(n)[3] / case.nets["merged"].get(n)[3])
+                                                      for n in names])))
     rng = np.random.default_rng(7)
     starts += [(case.nets["merged"], 0.4 * rng.standard_normal(len(names))) for _ in range(random_starts)]
     for start, x0 in starts:

@@ -70,9 +70,10 @@ from pris_cosim.errors import CircuitError
 from pris_cosim.frf import Response
 from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
 
+from .align import aligned_start
 from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
 from .evidence import (band_table, localise, noise_floor, noise_variance, noise_weights, resonance_comparison,
-                       unexplained_bands)
+                       residuals_white, unexplained_bands)
 from .fit import (CANDIDATE_FAILURES, WIDE_CONTINUATION, WIDER_CONTINUATION, DiagnosisError, FitResult, FrequencyFit,
                   configuration_ports, current_nc, group_names, significant)
 from .drift import GROSS_DRIFT, relaxed_drift
@@ -235,20 +236,29 @@ class _Context:
         anchored = self.prior.anchored(r.circuit)
         return self.prior.drift({n: v for n, v in r.values.items() if n.lower() in anchored})
 
+    def gross(self, r: FitResult) -> list[dict[str, Any]]:
+        """The values of ``r`` more than ``GROSS_DRIFT`` tolerances from the design."""
+        return [d for d in self.drift(r) if d["sigmas"] > GROSS_DRIFT]
+
     def distorted(self, r: FitResult) -> bool:
         """``r`` moved a value more than ``GROSS_DRIFT`` tolerances from the design (never without a prior)."""
-        return any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
+        return bool(self.gross(r))
 
     def explained(self, r: FitResult) -> bool:
         """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
         return r.objective <= NOISE_MARGIN * self.floor and not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
 
     def settled(self, r: FitResult) -> bool:
-        """No further cause is sought after ``r``: it fits to the noise floor (:meth:`residual_floor`) without moving
+        """No further cause is sought after ``r``: it fits to the noise floor (at or below the data's; within
+        ``NOISE_MARGIN`` of :meth:`residual_floor` with white residuals, :func:`.evidence.residuals_white`) without moving
         any value more than ``GROSS_DRIFT`` tolerances, or it has a new section (which shares the winding's values out
         anew, so values off the design are its own) and fits to the noise floor."""
-        # at or below the data's own floor (an overestimate on a resonant winding) the fit is at the noise anyway
-        if r.objective > max(NOISE_MARGIN * self.residual_floor(r), self.floor):
+        # at or below the data's own floor (an overestimate on a resonant winding) the fit is at the noise anyway;
+        # within the margin above it, only if what is left looks like noise (white along frequency)
+        # (one-port data only, as the residuals' floor: on several responses a few per cent of structure left in a
+        # near-noise fit is the rule, and every extension of a six-response model costs tens of seconds)
+        if r.objective > self.floor and (r.objective > NOISE_MARGIN * self.residual_floor(r)
+                                         or (self.one_port and not self.weights and not residuals_white(r.errors))):
             return False
         return bool(r.structure) or not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
 
@@ -480,8 +490,10 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         best = min(pool.values(), key=lambda r: r.bic)
         need = min_gain if not chosen else min_step_gain
         # a model that reaches the noise only by moving values far off the design is no explanation: against it, a
-        # candidate that reaches the noise within the design needs the BIC margin but no share of the cost
-        if ctx.distorted(current) and ctx.explained(best):
+        # candidate that reaches the noise within the design, or with fewer values far off (a value really off the
+        # design stays off in every model), needs the BIC margin but no share of the cost
+        if ctx.distorted(current) and (ctx.explained(best) or (
+                best.objective <= NOISE_MARGIN * floor["cost"] and len(ctx.gross(best)) < len(ctx.gross(current)))):
             need = 0.0
         if not significant(current.bic, current.objective, best.bic, best.objective, min_delta_bic, need):
             break
@@ -643,7 +655,11 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     lo, hi = fit.bounds()
     x0 = fit.start_vectors()[0]
     X = np.clip(x0 + spread * rng.standard_normal((starts, x0.size)), lo + 1e-9, hi - 1e-9)
-    short = fit.fit(x0s=X, grid=False, keep_starts=starts, max_nfev=max(10, max_nfev // 2))
+    # and from the given values with the model's resonances moved onto the measured ones (:mod:`.align`)
+    aligned = aligned_start(fit, x0, tau=fit.prior.tau if fit.prior is not None else float(np.log(1.2)))
+    if aligned is not None:
+        X = np.vstack([aligned[None], X])
+    short = fit.fit(x0s=X, grid=False, keep_starts=X.shape[0], max_nfev=max(10, max_nfev // 2))
     if short.objective >= first.objective:
         return first
     best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)

@@ -111,6 +111,42 @@ def noise_variance(f: np.ndarray, h: np.ndarray, sd: np.ndarray | None = None) -
     return scale2 / float(np.mean(1.0 / s2))
 
 
+#: Lags of the whiteness test of the residuals (:func:`residuals_white`).
+WHITENESS_LAGS = 10
+#: Its false-alarm probability: a model whose residuals are white noise is taken as not white this rarely.
+WHITENESS_ALPHA = 1e-3
+
+
+def residuals_white(errors: Mapping[str, np.ndarray], lags: int = WHITENESS_LAGS,
+                    alpha: float = WHITENESS_ALPHA) -> bool:
+    """Whether the log errors of a fit look like white noise along frequency (Ljung-Box test).
+
+    The residual test of system identification: for white residuals the
+    autocorrelations at lags ``1..m`` are independent with variance
+    ``1/N``, and ``Q = N (N + 2) sum_k rho_k^2 / (N - k)`` is chi-squared
+    with ``m`` degrees of freedom. An effect the model lacks leaves a smooth
+    error along frequency, strongly correlated from one point to the next,
+    even when its size is within the noise's estimate. The real and the
+    imaginary parts of each response are tested; all must pass at the
+    ``alpha`` level (Bonferroni over the series).
+    """
+    from scipy.stats import chi2
+
+    series = [part for e in errors.values() for part in (np.real(e), np.imag(e))]
+    limit = float(chi2.ppf(1 - alpha / max(len(series), 1), lags))
+    for x in series:
+        x = np.asarray(x, float) - np.mean(x)
+        n = x.size
+        var = float(x @ x)
+        if n <= 2 * lags or var <= 0:
+            continue
+        rho = np.array([float(x[k:] @ x[:-k]) / var for k in range(1, lags + 1)])
+        q = n * (n + 2) * float(np.sum(rho ** 2 / (n - np.arange(1, lags + 1))))
+        if q > limit:
+            return False
+    return True
+
+
 def noise_floor(f: np.ndarray, measured: Mapping[str, np.ndarray],
                 uncertainty: Mapping[str, np.ndarray] | None = None) -> dict[str, object]:
     """The cost a perfect model would still have: the sum over responses of the noise variances.

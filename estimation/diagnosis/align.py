@@ -1,0 +1,150 @@
+"""Resonance alignment: a start for a baseline fit with the model's resonances moved onto the measured ones.
+
+A winding's driving-point impedance has sharp parallel (peaks of ``|Z|``)
+and series (dips) resonances. With every value of a design a few per cent
+off, each resonance of the model sits a few per cent from the measured one,
+and a least-squares fit of the log errors from there often stalls: moving a
+resonance across the measured one first makes the errors larger. The
+resonance frequencies themselves are smooth functions of the values, as in
+the sensitivity-based updating of finite-element models against measured
+natural frequencies. This module moves the values so that the model's
+resonances (the poles of the port impedance, parallel; its zeros, series)
+fall on the measured ones, each measured resonance paired with one model
+resonance of its kind by least total log distance, with a weak pull
+towards the start values; the fit of the log errors then starts there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+from scipy.optimize import least_squares, linear_sum_assignment
+
+from ..resonances import find_resonances
+from .fit import FrequencyFit
+
+#: Prominence of a measured resonance that counts, dB (as :mod:`.unmerge`).
+MIN_PROMINENCE_DB = 1.0
+#: Pull towards the start values: a value moved by ``tau`` (one tolerance, or ``ln 1.2`` without a prior) weighs
+#: as much as a resonance 1 % off.
+PULL = 0.01
+#: Residual of a measured resonance that no model resonance is paired with (not differentiable: a constant).
+UNPAIRED = 0.5
+#: Evaluations of the alignment (each is one eigen-decomposition per configuration: cheap).
+ALIGN_NFEV = 60
+#: Model resonances counted: those within this factor of the measured band.
+BAND_MARGIN = 1.5
+
+
+def port_modes(fit: FrequencyFit, x: np.ndarray, index: int, f_lo: float, f_hi: float
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Parallel and series resonance frequencies (Hz, ascending) of configuration ``index``'s port impedance.
+
+    The poles of ``Z(s)`` (a current driven into the port) and its
+    invariant zeros (the finite generalised eigenvalues of the Rosenbrock
+    pencil ``[[A, B], [C, D]]``), with positive imaginary part, as
+    ``Im / 2 pi``, within ``f_lo / BAND_MARGIN .. f_hi * BAND_MARGIN``.
+    """
+    V = fit.values_of(np.atleast_2d(x[: fit.nc]))
+    values = fit.circuit.resolve({n: V[:, i] for i, n in enumerate(fit.free)}, check=False)
+    m = fit.models[index]
+    vals = dict(values)
+    for v in m.sources:
+        vals[v.lower()] = 0.0
+    ss = m.mna.state_space(vals)
+    A = ss.A[0]
+    n = A.shape[0]
+    if n == 0:
+        return np.zeros(0), np.zeros(0)
+    B = ss.B[0][:, [m._cols[0]]]
+    C = ss.C[0][[m._rows[0]], :]
+    D = np.atleast_2d(ss.D[0][m._rows[0], m._cols[0]])
+    poles = np.linalg.eigvals(A)
+    pencil = np.zeros((n + 1, n + 1))
+    pencil[:n, :n] = np.eye(n)
+    with np.errstate(all="ignore"):
+        zeros = sla.eigvals(np.block([[A, B], [C, D]]), pencil)
+    zeros = zeros[np.isfinite(zeros)]
+
+    def band(v: np.ndarray) -> np.ndarray:
+        fr = v[v.imag > 0].imag / (2 * np.pi)
+        return np.sort(fr[(fr > f_lo / BAND_MARGIN) & (fr < f_hi * BAND_MARGIN)])
+
+    return band(poles), band(zeros)
+
+
+def _impedances(fit: FrequencyFit) -> list[tuple[int, str]]:
+    """(configuration index, response name) of every measured port impedance."""
+    out = []
+    for i, m in enumerate(fit.models):
+        for r in m.responses:
+            if r.node is None and r.name in fit.measured:
+                out.append((i, r.name))
+                break
+    return out
+
+
+def _paired(measured: np.ndarray, model: np.ndarray) -> np.ndarray:
+    """Log distance of each measured resonance to the model resonance paired with it (``UNPAIRED`` if none)."""
+    out = np.full(measured.size, UNPAIRED)
+    if measured.size and model.size:
+        rows, cols = linear_sum_assignment(np.abs(np.log(model[None, :] / measured[:, None])))
+        out[rows] = np.log(model[cols] / measured[rows])
+    return out
+
+
+def aligned_start(fit: FrequencyFit, x0: np.ndarray, tau: float = float(np.log(1.2)),
+                  max_nfev: int = ALIGN_NFEV) -> np.ndarray | None:
+    """``x0`` with its circuit values moved so that the port impedances' resonances fall on the measured ones.
+
+    Parameters
+    ----------
+    fit : FrequencyFit
+        The fit (its measured port impedances give the resonances).
+    x0 : numpy.ndarray
+        Start vector (log ratios to ``fit.start``; effect parameters kept).
+    tau : float
+        Log-scale tolerance of the values (the design prior's): the pull
+        towards ``x0`` weighs one ``tau`` like a resonance ``PULL`` off.
+    max_nfev : int
+        Evaluations of the alignment.
+
+    Returns
+    -------
+    numpy.ndarray or None
+        The aligned vector; ``None`` when no measured resonance is found or
+        the alignment moves no resonance closer.
+    """
+    f = fit.f
+    targets: list[tuple[int, np.ndarray, np.ndarray]] = []
+    for i, name in _impedances(fit):
+        found = find_resonances(f, fit.measured[name], min_prominence_db=MIN_PROMINENCE_DB)
+        peaks = np.array([r.frequency_hz for r in found if r.kind == "parallel"])
+        dips = np.array([r.frequency_hz for r in found if r.kind == "series"])
+        if peaks.size + dips.size:
+            targets.append((i, peaks, dips))
+    if not targets or fit.nc == 0:
+        return None
+    start = np.asarray(x0, float)[: fit.nc].copy()
+    pull = PULL / tau
+
+    def residuals(xc: np.ndarray) -> np.ndarray:
+        x = np.concatenate([xc, np.asarray(x0, float)[fit.nc:]])
+        parts = []
+        for i, peaks, dips in targets:
+            poles, zeros = port_modes(fit, x, i, float(f[0]), float(f[-1]))
+            parts += [_paired(peaks, poles), _paired(dips, zeros)]
+        parts.append(pull * (xc - start))
+        return np.concatenate(parts)
+
+    lo, hi = fit.bounds()
+    lo, hi = lo[: fit.nc] + 1e-9, hi[: fit.nc] - 1e-9
+    try:
+        r0 = residuals(start)
+        sol = least_squares(residuals, np.clip(start, lo, hi), bounds=(lo, hi), max_nfev=max_nfev, diff_step=1e-4)
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    if not np.isfinite(sol.cost) or sol.cost >= 0.5 * float(r0 @ r0):
+        return None
+    return np.concatenate([sol.x, np.asarray(x0, float)[fit.nc:]])
+
