@@ -119,7 +119,7 @@ class Element:
     def kind(self) -> str:
         return self.name[0].upper()
 
-    @property
+    @cached_property
     def key(self) -> str:
         return self.name.lower()
 

@@ -20,11 +20,9 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import least_squares, linear_sum_assignment
 
-from ..resonances import find_resonances
 from .fit import FrequencyFit
+from .unmerge import resonance_frequencies
 
-#: Prominence of a measured resonance that counts, dB (as :mod:`.unmerge`).
-MIN_PROMINENCE_DB = 1.0
 #: Pull towards the start values: a value moved by ``tau`` (one tolerance, or ``ln 1.2`` without a prior) weighs
 #: as much as a resonance 1 % off.
 PULL = 0.01
@@ -45,20 +43,11 @@ def port_modes(fit: FrequencyFit, x: np.ndarray, index: int, f_lo: float, f_hi: 
     pencil ``[[A, B], [C, D]]``), with positive imaginary part, as
     ``Im / 2 pi``, within ``f_lo / BAND_MARGIN .. f_hi * BAND_MARGIN``.
     """
-    V = fit.values_of(np.atleast_2d(x[: fit.nc]))
-    values = fit.circuit.resolve({n: V[:, i] for i, n in enumerate(fit.free)}, check=False)
-    m = fit.models[index]
-    vals = dict(values)
-    for v in m.sources:
-        vals[v.lower()] = 0.0
-    ss = m.mna.state_space(vals)
-    A = ss.A[0]
+    values = fit.circuit.resolve(fit.overrides(x), check=False)
+    A, B, C, D = fit.models[index].port_system(values)
     n = A.shape[0]
     if n == 0:
         return np.zeros(0), np.zeros(0)
-    B = ss.B[0][:, [m._cols[0]]]
-    C = ss.C[0][[m._rows[0]], :]
-    D = np.atleast_2d(ss.D[0][m._rows[0], m._cols[0]])
     poles = np.linalg.eigvals(A)
     pencil = np.zeros((n + 1, n + 1))
     pencil[:n, :n] = np.eye(n)
@@ -93,8 +82,7 @@ def _paired(measured: np.ndarray, model: np.ndarray) -> np.ndarray:
     return out
 
 
-def aligned_start(fit: FrequencyFit, x0: np.ndarray, tau: float = float(np.log(1.2)),
-                  max_nfev: int = ALIGN_NFEV) -> np.ndarray | None:
+def aligned_start(fit: FrequencyFit, x0: np.ndarray, max_nfev: int = ALIGN_NFEV) -> np.ndarray | None:
     """``x0`` with its circuit values moved so that the port impedances' resonances fall on the measured ones.
 
     Parameters
@@ -103,9 +91,6 @@ def aligned_start(fit: FrequencyFit, x0: np.ndarray, tau: float = float(np.log(1
         The fit (its measured port impedances give the resonances).
     x0 : numpy.ndarray
         Start vector (log ratios to ``fit.start``; effect parameters kept).
-    tau : float
-        Log-scale tolerance of the values (the design prior's): the pull
-        towards ``x0`` weighs one ``tau`` like a resonance ``PULL`` off.
     max_nfev : int
         Evaluations of the alignment.
 
@@ -118,15 +103,15 @@ def aligned_start(fit: FrequencyFit, x0: np.ndarray, tau: float = float(np.log(1
     f = fit.f
     targets: list[tuple[int, np.ndarray, np.ndarray]] = []
     for i, name in _impedances(fit):
-        found = find_resonances(f, fit.measured[name], min_prominence_db=MIN_PROMINENCE_DB)
-        peaks = np.array([r.frequency_hz for r in found if r.kind == "parallel"])
-        dips = np.array([r.frequency_hz for r in found if r.kind == "series"])
+        freq, parallel = resonance_frequencies(f, fit.measured[name])
+        peaks, dips = freq[parallel], freq[~parallel]
         if peaks.size + dips.size:
             targets.append((i, peaks, dips))
     if not targets or fit.nc == 0:
         return None
     start = np.asarray(x0, float)[: fit.nc].copy()
-    pull = PULL / tau
+    # the pull towards x0 weighs one tolerance (the design prior's, else ln 1.2) like a resonance PULL off
+    pull = PULL / (fit.prior.tau if fit.prior is not None else float(np.log(1.2)))
 
     def residuals(xc: np.ndarray) -> np.ndarray:
         x = np.concatenate([xc, np.asarray(x0, float)[fit.nc:]])

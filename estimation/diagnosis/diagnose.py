@@ -246,7 +246,7 @@ class _Context:
 
     def explained(self, r: FitResult) -> bool:
         """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
-        return r.objective <= NOISE_MARGIN * self.floor and not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
+        return r.objective <= NOISE_MARGIN * self.floor and not self.distorted(r)
 
     def settled(self, r: FitResult) -> bool:
         """No further cause is sought after ``r``: it fits to the noise floor (at or below the data's; within
@@ -260,7 +260,7 @@ class _Context:
         if r.objective > self.floor and (r.objective > NOISE_MARGIN * self.residual_floor(r)
                                          or (self.one_port and not self.weights and not residuals_white(r.errors))):
             return False
-        return bool(r.structure) or not any(d["sigmas"] > GROSS_DRIFT for d in self.drift(r))
+        return bool(r.structure) or not self.distorted(r)
 
     def residual_floor(self, r: FitResult) -> float:
         """The noise floor estimated from the third differences of ``r``'s residuals, if below the data's.
@@ -656,7 +656,7 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     x0 = fit.start_vectors()[0]
     X = np.clip(x0 + spread * rng.standard_normal((starts, x0.size)), lo + 1e-9, hi - 1e-9)
     # and from the given values with the model's resonances moved onto the measured ones (:mod:`.align`)
-    aligned = aligned_start(fit, x0, tau=fit.prior.tau if fit.prior is not None else float(np.log(1.2)))
+    aligned = aligned_start(fit, x0)
     if aligned is not None:
         X = np.vstack([aligned[None], X])
     short = fit.fit(x0s=X, grid=False, keep_starts=X.shape[0], max_nfev=max(10, max_nfev // 2))
@@ -738,7 +738,8 @@ def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effec
     tail = base.x[current_nc(base):] if effects else np.zeros(0)
     staged = []
     for cand in section_candidates(circuit, ports):
-        if effects and ctx.one_port:  # after a frequency-dependent cause, a section with free couplings would only take its rest
+        # one port, after a frequency-dependent cause: a section with free couplings would only take its rest
+        if effects and ctx.one_port:
             cand.couplings = []
         try:
             whole = ctx.fit(cand.circuit, effects, couplings=cand.couplings)
@@ -882,7 +883,7 @@ def _single_causes(ctx: _Context, todo: Sequence[str], baseline: FitResult, prog
             explained = any(ctx.explained(r) for r in results.values())
             # with a design prior, a baseline whose values all stay within GROSS_DRIFT tolerances has absorbed
             # nothing: the design values add no start
-            distorted = ctx.prior is None or any(d["sigmas"] > GROSS_DRIFT for d in ctx.drift(baseline))
+            distorted = ctx.prior is None or ctx.distorted(baseline)
             res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.objective,
                                        from_nominal=distorted and not explained)
             variants_tried[cause] = variants

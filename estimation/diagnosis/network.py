@@ -153,6 +153,18 @@ class ProbedConfiguration:
         """Number of changeable branches."""
         return len(self.branches)
 
+    def port_system(self, values: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``A, B, C, D`` of the port impedance (current into the port, port voltage out) for one parameter set.
+
+        ``B`` is ``(n, 1)``, ``C`` ``(1, n)``, ``D`` ``(1, 1)``; the branch sources are zero.
+        """
+        vals = dict(values)
+        for v in self.sources:
+            vals[v.lower()] = 0.0
+        ss = self.mna.state_space(vals)
+        return (ss.A[0], ss.B[0][:, [self._cols[0]]], ss.C[0][[self._rows[0]], :],
+                np.atleast_2d(ss.D[0][self._rows[0], self._cols[0]]))
+
     def transfer(self, values: Mapping[str, np.ndarray | float], s: np.ndarray, keep: bool = False) -> np.ndarray:
         """``T(s)`` for every parameter set: shape ``(P, nodes + k, 1 + k, F)``.
 

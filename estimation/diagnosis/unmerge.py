@@ -63,7 +63,8 @@ def resolved_points(uncertainty: Mapping[str, np.ndarray]) -> dict[str, np.ndarr
     return {n: np.asarray(s, float) <= MAX_RESONANCE_SD for n, s in uncertainty.items()}
 
 
-def _resonances(f: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def resonance_frequencies(f: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Resonance frequencies of ``h`` (Hz) and which are parallel (peaks of ``|h|``), at ``MIN_PROMINENCE_DB``."""
     r = find_resonances(f, h, min_prominence_db=MIN_PROMINENCE_DB)
     return np.array([x.frequency_hz for x in r]), np.array([x.kind == "parallel" for x in r], bool)
 
@@ -105,8 +106,8 @@ def _paired_resonances(f: np.ndarray, measured: Mapping[str, np.ndarray], predic
         keep = np.ones(f.size, bool) if keep is None else keep
         if np.count_nonzero(keep) < 3:
             continue
-        fm, pm = _resonances(f[keep], h[keep])
-        fp, pp = _resonances(f[keep], predicted[name][keep])
+        fm, pm = resonance_frequencies(f[keep], h[keep])
+        fp, pp = resonance_frequencies(f[keep], predicted[name][keep])
         for kind in (True, False):
             yield fm[pm == kind], fp[pp == kind]
 
