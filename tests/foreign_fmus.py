@@ -5,7 +5,8 @@ for pythonfmu, stepped exactly with the matrix exponential of the augmented
 matrix while its input is held over each communication step (a DAC-driven
 source), and its record is made by fmpy's ``simulate_fmu`` with a held PRBS.
 Building and recording run in a subprocess: a pythonfmu FMU may crash the
-process that frees it.
+process that frees it, so the recorder writes its file and exits without
+freeing the instance, and a recording killed by a signal is made again.
 """
 
 from __future__ import annotations
@@ -134,7 +135,7 @@ MODELS = {
 }
 
 _RECORD = '''
-import json, sys
+import json, os, sys
 import numpy as np
 import fmpy
 fmu, spec, out = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3]
@@ -147,14 +148,19 @@ u = spec["amplitude"] * np.repeat(2 * np.array(bits) - 1, hold)[:n].astype(float
 t = np.arange(n) / fs
 sig = np.zeros(n, dtype=[("time", float), (spec["input"], float)])
 sig["time"], sig[spec["input"]] = t, u
-r = fmpy.simulate_fmu(fmu, stop_time=t[-1], step_size=1 / fs, output_interval=1 / fs, input=sig,
-                      output=spec["outputs"], start_values=spec["truth"])
+unzipped = fmpy.extract(fmu)
+md = fmpy.read_model_description(unzipped)
+inst = fmpy.instantiate_fmu(unzipped, md, "CoSimulation")      # never freed: the process ends with os._exit
+r = fmpy.simulate_fmu(unzipped, stop_time=t[-1], step_size=1 / fs, output_interval=1 / fs, input=sig,
+                      output=spec["outputs"], start_values=spec["truth"], model_description=md, fmu_instance=inst)
 cols = [np.asarray(r[o], float)[:n] for o in spec["outputs"]]
 rng = np.random.default_rng(spec["seed"])
 if spec["noise"]:
     cols = [c + spec["noise"] * np.sqrt(np.mean(c ** 2)) * rng.standard_normal(n) for c in cols]
 np.savetxt(out, np.column_stack([t, u] + cols), delimiter=",", header=",".join(["time_s", spec["input"]] + spec["outputs"]),
            comments="", fmt="%.15e")
+sys.stdout.flush()
+os._exit(0)
 '''
 
 
@@ -179,9 +185,14 @@ def record(name: str, fmu: Path, out: Path, fs: float = 2e6, n: int = 2048, hold
     m = MODELS[name]
     spec = {"fs": fs, "n": n, "hold": hold, "amplitude": m["amplitude"], "input": m["input"],
             "outputs": m["outputs"], "truth": m["truth"], "noise": noise, "seed": seed}
-    subprocess.run([sys.executable, "-c", _RECORD, str(fmu), json.dumps(spec), str(out)], check=True,
-                   capture_output=True, text=True)
-    return out
+    for attempt in range(3):              # a crash inside the foreign FMU's embedded interpreter is retried
+        run = subprocess.run([sys.executable, "-c", _RECORD, str(fmu), json.dumps(spec), str(out)],
+                             capture_output=True, text=True)
+        if run.returncode == 0:
+            return out
+        if run.returncode > 0:
+            break
+    raise RuntimeError(f"recording {fmu} failed (exit {run.returncode}): {run.stderr[-1500:]}")
 
 
 def read(path: Path) -> dict[str, np.ndarray]:
