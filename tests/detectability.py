@@ -19,7 +19,9 @@ squared complex log error on every response is below the noise's own,
 baseline's structure can reach. Hidden effects other than the missing
 section are left out of both sides (they are not what is being asked about).
 A fit that fails to get there leaves the case counted as detectable, so the
-count of undetectable cases is a lower bound.
+count of undetectable cases is a lower bound. The other effect of a compound
+case with a missing section is asked about the same way, with the truth's
+own sections (the section given) fitted to the whole truth.
 """
 
 from __future__ import annotations
@@ -37,7 +39,8 @@ def _responses(net: rs.Net, kind: str, f: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target: str = "sections",
-                      bound: float = float(np.log(100.0)), free: tuple[str, ...] = ()) -> dict[str, float]:
+                      bound: float = float(np.log(100.0)), free: tuple[str, ...] = (), structure: str = "baseline"
+                      ) -> dict[str, float]:
     """Fit of the baseline's structure to the truth (no noise).
 
     Parameters
@@ -58,6 +61,12 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
         diagnosis counts a fit as drift, not as an explanation).
     free : tuple of str
         Elements exempt from ``bound`` (a design case's drifted value).
+    structure : str
+        ``baseline``: the baseline's structure, from its values and the
+        merge of the truth's sections (as above); ``sections``: the truth's
+        own sections (a missing section given), from their values, so that
+        ``target="truth"`` asks whether the other effects of a compound case
+        are detectable once the section is there.
 
     Returns
     -------
@@ -67,7 +76,9 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
     """
     f = case.frequency_hz
     truth = _responses(case.nets[target], case.kind, f)
-    names = [e[0] for e in case.nets["baseline"].elements if e[0][0].upper() in "RLC"]
+    home = case.nets["sections" if structure == "sections" else "merged"]
+    names = [e[0] for e in (home if structure == "sections" else case.nets["baseline"]).elements
+             if e[0][0].upper() in "RLC"]
 
     def net_of(start: rs.Net, x: np.ndarray) -> rs.Net:
         net = start.copy()
@@ -88,18 +99,18 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
     hi = np.array([big if n.lower() in {x.lower() for x in free} else bound for n in names])
     best = np.inf
     zero = np.zeros(len(names))
-    starts = [(case.nets["merged"], zero)]
-    if case.nets["baseline"].elements != case.nets["merged"].elements:
+    starts = [(home, zero)]
+    if structure != "sections" and case.nets["baseline"].elements != case.nets["merged"].elements:
         starts.append((case.nets["baseline"], zero))
     # the truth's own constant values (as ratios to the merge, so the box stays the same), where the truth has the
     # baseline's structure (its effects left out)
     sections = case.nets.get("sections")
-    if target == "truth" and sections is not None and [e[0] for e in sections.elements if e[0][0].upper() in "RLC"] \
-            == names:
+    if target == "truth" and structure != "sections" and sections is not None \
+            and [e[0] for e in sections.elements if e[0][0].upper() in "RLC"] == names:
         starts.append((case.nets["merged"], np.array([np.log(sections.get(n)[3] / case.nets["merged"].get(n)[3])
                                                       for n in names])))
     rng = np.random.default_rng(7)
-    starts += [(case.nets["merged"], 0.4 * rng.standard_normal(len(names))) for _ in range(random_starts)]
+    starts += [(home, 0.4 * rng.standard_normal(len(names))) for _ in range(random_starts)]
     for start, x0 in starts:
         sol = least_squares(residuals, np.clip(x0, -0.999 * hi, 0.999 * hi), args=(start,), bounds=(-hi, hi),
                             max_nfev=max_nfev, x_scale="jac")

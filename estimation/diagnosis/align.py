@@ -16,6 +16,8 @@ towards the start values; the fit of the log errors then starts there.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import least_squares, linear_sum_assignment
@@ -82,7 +84,41 @@ def _paired(measured: np.ndarray, model: np.ndarray) -> np.ndarray:
     return out
 
 
-def aligned_start(fit: FrequencyFit, x0: np.ndarray, max_nfev: int = ALIGN_NFEV) -> np.ndarray | None:
+def _targets(fit: FrequencyFit) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """(configuration index, measured peaks, measured dips) of every measured port impedance with resonances, Hz."""
+    targets = []
+    for i, name in _impedances(fit):
+        freq, parallel = resonance_frequencies(fit.f, fit.measured[name])
+        peaks, dips = freq[parallel], freq[~parallel]
+        if peaks.size + dips.size:
+            targets.append((i, peaks, dips))
+    return targets
+
+
+def resonance_mismatch(fit: FrequencyFit, X: np.ndarray) -> np.ndarray:
+    """Sum of squared log distances between the measured resonances and the model's, per row of ``X``.
+
+    Each measured peak (dip) of a port impedance is paired with a pole
+    (zero) of the model's port impedance (``UNPAIRED`` when there is none to
+    pair); rows with a singular model give ``inf``. Zeros when no measured
+    resonance is found.
+    """
+    X = np.atleast_2d(np.asarray(X, float))
+    targets = _targets(fit)
+    out = np.zeros(X.shape[0])
+    f_lo, f_hi = float(fit.f[0]), float(fit.f[-1])
+    for k, x in enumerate(X):
+        try:
+            for i, peaks, dips in targets:
+                poles, zeros = port_modes(fit, x, i, f_lo, f_hi)
+                out[k] += float(np.sum(_paired(peaks, poles) ** 2) + np.sum(_paired(dips, zeros) ** 2))
+        except (np.linalg.LinAlgError, ValueError):
+            out[k] = np.inf
+    return out
+
+
+def aligned_start(fit: FrequencyFit, x0: np.ndarray, max_nfev: int = ALIGN_NFEV, free: Sequence[int] = (),
+                  with_cost: bool = False) -> np.ndarray | tuple[np.ndarray, float] | None:
     """``x0`` with its circuit values moved so that the port impedances' resonances fall on the measured ones.
 
     Parameters
@@ -93,25 +129,27 @@ def aligned_start(fit: FrequencyFit, x0: np.ndarray, max_nfev: int = ALIGN_NFEV)
         Start vector (log ratios to ``fit.start``; effect parameters kept).
     max_nfev : int
         Evaluations of the alignment.
+    free : sequence of int
+        Circuit columns not pulled towards ``x0`` (a value tried as off the
+        design).
+    with_cost : bool
+        Also return what is left of the alignment (half the sum of squared
+        log distances, pull included).
 
     Returns
     -------
-    numpy.ndarray or None
-        The aligned vector; ``None`` when no measured resonance is found or
-        the alignment moves no resonance closer.
+    numpy.ndarray, (numpy.ndarray, float) or None
+        The aligned vector (and its cost); ``None`` when no measured
+        resonance is found or the alignment moves no resonance closer.
     """
     f = fit.f
-    targets: list[tuple[int, np.ndarray, np.ndarray]] = []
-    for i, name in _impedances(fit):
-        freq, parallel = resonance_frequencies(f, fit.measured[name])
-        peaks, dips = freq[parallel], freq[~parallel]
-        if peaks.size + dips.size:
-            targets.append((i, peaks, dips))
+    targets = _targets(fit)
     if not targets or fit.nc == 0:
         return None
     start = np.asarray(x0, float)[: fit.nc].copy()
     # the pull towards x0 weighs one tolerance (the design prior's, else ln 1.2) like a resonance PULL off
-    pull = PULL / (fit.prior.tau if fit.prior is not None else float(np.log(1.2)))
+    pull = np.full(fit.nc, PULL / (fit.prior.tau if fit.prior is not None else float(np.log(1.2))))
+    pull[np.asarray(free, int)] = 0.0
 
     def residuals(xc: np.ndarray) -> np.ndarray:
         x = np.concatenate([xc, np.asarray(x0, float)[fit.nc:]])
@@ -131,5 +169,6 @@ def aligned_start(fit: FrequencyFit, x0: np.ndarray, max_nfev: int = ALIGN_NFEV)
         return None
     if not np.isfinite(sol.cost) or sol.cost >= 0.5 * float(r0 @ r0):
         return None
-    return np.concatenate([sol.x, np.asarray(x0, float)[fit.nc:]])
+    x = np.concatenate([sol.x, np.asarray(x0, float)[fit.nc:]])
+    return (x, float(sol.cost)) if with_cost else x
 

@@ -68,15 +68,15 @@ import numpy as np
 from pris_cosim.circuit import Circuit
 from pris_cosim.errors import CircuitError
 from pris_cosim.frf import Response
-from pris_cosim.models import Configuration, Model, get_model, lumped_rlc
+from pris_cosim.models import Configuration, Model, get_model
 
-from .align import aligned_start
+from .baseline import fit_multistart, lumped_from_data
 from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
 from .evidence import (band_table, localise, noise_floor, noise_variance, noise_weights, resonance_comparison,
                        residuals_white, unexplained_bands)
 from .fit import (CANDIDATE_FAILURES, WIDE_CONTINUATION, WIDER_CONTINUATION, DiagnosisError, FitResult, FrequencyFit,
                   configuration_ports, current_nc, group_names, significant)
-from .drift import GROSS_DRIFT, relaxed_drift
+from .drift import GROSS_DRIFT, located_drift, relaxed_drift
 from .holdout import held_out_gain
 from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from .forms import rechoose_forms
@@ -185,19 +185,6 @@ def _refuse(pool: dict[str, Any], failed: list[dict[str, Any]], best: Any, cause
 def _log(msg: str, progress: bool) -> None:
     if progress:
         print(f"diagnose: {msg}", file=sys.stderr, flush=True)
-
-
-def lumped_from_data(f: np.ndarray, z: np.ndarray) -> list[Model]:
-    """Starting lumped R-L-C models estimated from one-port data (several capacitance guesses)."""
-    w = 2 * np.pi * f
-    k = max(1, f.size // 20)
-    l0 = float(np.median(z[:k].imag / w[:k]))
-    if not l0 > 0:
-        raise DiagnosisError("one-port data is not inductive at low frequency; give a baseline model")
-    r0 = float(max(np.median(z[:k].real), 1e-6 * np.abs(z[0])))
-    peak = f[int(np.argmax(np.abs(z)))]
-    guesses = [peak, 3 * f[-1], 10 * f[-1]]
-    return [lumped_rlc(r0, l0, 1 / ((2 * np.pi * fr) ** 2 * l0)) for fr in guesses]
 
 
 @dataclass
@@ -481,7 +468,79 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             _log(f"pair {pair.cause}: cost {pair.cost:.4g}, gain {1 - pair.objective / baseline.objective:.3f}, "
                  f"dBIC {baseline.bic - pair.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
 
-    # ---- forward selection
+    # ---- forward selection, then a backward check; a section named with other causes is checked against the
+    # selection without it (a section's free values take a share of any effect, and a greedy first step that names
+    # it may never reach the model of the effects alone)
+    opts = dict(min_delta_bic=min_delta_bic, min_gain=min_gain, min_step_gain=min_step_gain, max_causes=max_causes)
+    current, chosen, steps = _select(ctx, baseline, pool, results, variants_tried, failed, **opts)
+    if any(c in STRUCTURAL for c in chosen) and (len(chosen) > 1 or not ctx.explained(current)):
+        alt_pool = {c: r for c, r in pool.items() if not any(s in c.split("+") for s in STRUCTURAL)}
+        if alt_pool:
+            _log("selection again without " + ", ".join(c for c in chosen if c in STRUCTURAL), progress)
+            alt_failed: list[dict[str, Any]] = []
+            alt = _select(ctx, baseline, alt_pool, results, variants_tried, alt_failed, **opts)
+            if alt[1] and alt[0].bic < current.bic:
+                _log(f"{', '.join(alt[1])} without the section: BIC lower by {current.bic - alt[0].bic:.1f} "
+                     f"than {', '.join(chosen)}: kept", progress)
+                current, chosen, steps = alt
+                failed += alt_failed
+            else:
+                _log(f"without the section ({', '.join(alt[1]) or 'none'}): BIC higher by "
+                     f"{alt[0].bic - current.bic:.1f}: the section stays", progress)
+    extended = current if chosen else None
+    # ---- a value of the design really off: one value freed may explain what the prior's spread-out fit leaves
+    if prior is not None and not ctx.explained(extended or baseline):
+        located = located_drift(ctx, extended or baseline, NOISE_MARGIN * floor["cost"], lambda m: _log(m, progress))
+        if located is not None:
+            located.structure = (extended or baseline).structure
+            if extended is not None:
+                located.cause = extended.cause
+                extended = located
+            else:
+                baseline = located
+    cands = sorted(results.values(), key=lambda r: r.bic)
+    diag = Diagnosis(chosen[0] if chosen else "none", baseline, extended, cands, f, data, causes=chosen, steps=steps,
+                     noise=floor, failed=failed)
+    final = extended or baseline
+    diag.tolerance = float(tolerance) if prior is not None else float("inf")
+    diag.drift = relaxed_drift(ctx, final, lambda m: _log(m, progress))
+    diag.baseline_drift = ctx.drift(baseline)
+    if diag.drift:
+        _log("values beyond the design tolerance in the final model: "
+             + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift),
+             progress)
+    diag.unexplained = unexplained_bands(f, {n: e * weights[n] if n in weights else e for n, e in final.errors.items()},
+                                         floor["per_response"])
+    diag.evidence = {
+        "baseline_model": model.name,
+        "localisation": localise(f, data, baseline.errors),
+        "resonances": resonance_comparison(f, data, baseline.predicted),
+        "bands_before": band_table(f, baseline.errors),
+        "bands_after": band_table(f, extended.errors) if extended else [],
+        "gain_per_response": ({n: 1 - float(np.mean(np.abs(extended.errors[n]) ** 2) / np.mean(np.abs(baseline.errors[n]) ** 2))
+                               for n in data} if extended else {}),
+        "criterion": (("" if prior is None else f"every fit penalised by a log-normal prior around the design values "
+                       f"(tolerance {prior.tolerance:g}), BIC and gains on the penalised cost; ")
+                      + f"forward selection by BIC: a cause is named if dBIC >= {min_delta_bic} and it removes at least "
+                      f"{min_gain} (first cause) or {min_step_gain} (further causes) of the cost left; stop at "
+                      f"{NOISE_MARGIN} x the noise floor"),
+    }
+    if extended is not None:
+        diag.realisation = realise_extended(extended, configs, f)
+    diag.wall_s = time.perf_counter() - t0
+    _log(f"causes: {', '.join(chosen) or 'none'} (gain {diag.gain:.3f}) in {diag.wall_s:.1f} s", progress)
+    return diag
+
+
+def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], results: dict[str, FitResult],
+            variants_tried: dict[str, list[Effect]], failed: list[dict[str, Any]], min_delta_bic: float,
+            min_gain: float, min_step_gain: float, max_causes: int
+            ) -> tuple[FitResult, list[str], list[dict[str, Any]]]:
+    """Forward selection by BIC from ``baseline`` over the candidates in ``pool``, then the backward check and the
+    forms chosen again: the final model, the causes named and the steps (``failed`` gets the refused ones)."""
+    progress, floor, prior, weights = ctx.progress, {"cost": ctx.floor}, ctx.prior, ctx.weights
+    configs, f, data, fixed, impedance_scale = ctx.configs, ctx.f, ctx.data, ctx.fixed, ctx.scale
+    pool = dict(pool)
     current, chosen, steps, deferred = baseline, [], [], set()
     while pool and len(chosen) < max_causes:
         if ctx.settled(current):
@@ -574,98 +633,13 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         current, swaps = rechoose_forms(ctx, current, min_delta_bic, _CANDIDATE_FAILURES, lambda m: _log(m, progress))
         steps = steps + swaps
 
-    extended = current if chosen else None
-    cands = sorted(results.values(), key=lambda r: r.bic)
-    diag = Diagnosis(chosen[0] if chosen else "none", baseline, extended, cands, f, data, causes=chosen, steps=steps,
-                     noise=floor, failed=failed)
-    final = extended or baseline
-    diag.tolerance = float(tolerance) if prior is not None else float("inf")
-    diag.drift = relaxed_drift(ctx, final, lambda m: _log(m, progress))
-    diag.baseline_drift = ctx.drift(baseline)
-    if diag.drift:
-        _log("values beyond the design tolerance in the final model: "
-             + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift),
-             progress)
-    diag.unexplained = unexplained_bands(f, {n: e * weights[n] if n in weights else e for n, e in final.errors.items()},
-                                         floor["per_response"])
-    diag.evidence = {
-        "baseline_model": model.name,
-        "localisation": localise(f, data, baseline.errors),
-        "resonances": resonance_comparison(f, data, baseline.predicted),
-        "bands_before": band_table(f, baseline.errors),
-        "bands_after": band_table(f, extended.errors) if extended else [],
-        "gain_per_response": ({n: 1 - float(np.mean(np.abs(extended.errors[n]) ** 2) / np.mean(np.abs(baseline.errors[n]) ** 2))
-                               for n in data} if extended else {}),
-        "criterion": (("" if prior is None else f"every fit penalised by a log-normal prior around the design values "
-                       f"(tolerance {prior.tolerance:g}), BIC and gains on the penalised cost; ")
-                      + f"forward selection by BIC: a cause is named if dBIC >= {min_delta_bic} and it removes at least "
-                      f"{min_gain} (first cause) or {min_step_gain} (further causes) of the cost left; stop at "
-                      f"{NOISE_MARGIN} x the noise floor"),
-    }
-    if extended is not None:
-        diag.realisation = realise_extended(extended, configs, f)
-    diag.wall_s = time.perf_counter() - t0
-    _log(f"causes: {', '.join(chosen) or 'none'} (gain {diag.gain:.3f}) in {diag.wall_s:.1f} s", progress)
-    return diag
+    return current, chosen, steps
 
 
 # ============================================================================== fitting causes
-#: Baseline fits: local fits from the given values and from this many starts around them (a value twice its
-#: design value is reached from 16, not from 4 or 8, in the design family's drift case).
-BASELINE_STARTS = 16
 #: Evaluations of each refit of the held-out check (:mod:`.holdout`): converged, so the check does not depend on
 #: where a short refit stopped.
 HOLDOUT_NFEV = 100
-#: Spread of those starts: standard deviation of the log of each value (0.3: about 30 %).
-BASELINE_SPREAD = 0.3
-
-
-def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: float = BASELINE_SPREAD,
-                   max_nfev: int = 200, good_enough: float = 0.0) -> FitResult:
-    """The baseline's values fitted from the given values and, unless that fit is good enough, from random starts.
-
-    The fit from the given values is continued from smoothed errors
-    (:meth:`.fit.FrequencyFit.fit_continued`): a resonance of the design a
-    few per cent off the measured one stalls a local fit of the raw errors.
-    A local fit from the design values alone can end in a poor optimum of
-    the baseline (one value driven to a bound while the others compensate),
-    and every cause would then seem to explain the data. The random starts
-    are drawn with a fixed seed (a diagnosis is repeatable) around the given
-    values; each gets a short local fit, and the best of them a full one
-    when it beats the fit from the given values.
-
-    Parameters
-    ----------
-    fit : FrequencyFit
-        The baseline (no effects).
-    starts : int
-        Random starts besides the given values.
-    spread : float
-        Standard deviation of the log-scale perturbation of every value.
-    max_nfev : int
-        Evaluations of the full local fits (half of them for the short ones).
-    good_enough : float
-        Cost at which the fit from the given values is kept without trying
-        the random starts (the noise floor).
-    """
-    first = fit.fit_continued(fit.start_vectors()[0], max_nfev=max_nfev)
-    if first.objective <= good_enough or starts <= 0:
-        return first
-    rng = np.random.default_rng(20260101)
-    lo, hi = fit.bounds()
-    x0 = fit.start_vectors()[0]
-    X = np.clip(x0 + spread * rng.standard_normal((starts, x0.size)), lo + 1e-9, hi - 1e-9)
-    # and from the given values with the model's resonances moved onto the measured ones (:mod:`.align`)
-    aligned = aligned_start(fit, x0)
-    if aligned is not None:
-        X = np.vstack([aligned[None], X])
-    short = fit.fit(x0s=X, grid=False, keep_starts=X.shape[0], max_nfev=max(10, max_nfev // 2))
-    if short.objective >= first.objective:
-        return first
-    best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)
-    best.wall_s += first.wall_s + short.wall_s
-    best.alternative = first  # the optimum reached from the given values: structures are sought from it too
-    return best
 
 
 def _effect_starts(ctx: _Context, fit: FrequencyFit, effect: Effect) -> list[dict[str, float]] | None:
@@ -904,7 +878,8 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
                     min_delta_bic: float, progress: bool) -> tuple[FitResult, list[str], list[dict[str, Any]]]:
     """Refit without each named effect in turn (warm start); drop it when the BIC does not worsen by ``min_delta_bic``.
 
-    Structural causes (a missing section) and effects that added an element are kept.
+    Structural causes (a missing section) are kept. A core loss that added its resistor (the baseline had no core
+    loop) is dropped with it.
     """
     changed = True
     while changed and len(current.effects) > 1:
@@ -912,13 +887,17 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
         nc = current_nc(current)
         offsets = np.cumsum([0] + [len(e.parameters) for e in current.effects])
         for j, eff in enumerate(current.effects):
-            if eff.cause == "missing-section" or (eff.cause == "core-loss" and current.circuit.has_element("Rcore")):
+            if eff.cause in STRUCTURAL:
                 continue
+            circuit = current.fitted_circuit()
+            if eff.cause == "core-loss" and circuit.has_element("Rcore") and not (
+                    ctx.nominal is not None and ctx.nominal.has_element("Rcore")):
+                circuit = replace(circuit, elements=[e for e in circuit.elements if e.key != "rcore"])
             keep = [e for i, e in enumerate(current.effects) if i != j]
             tail = np.concatenate([current.x[nc + offsets[i]: nc + offsets[i + 1]]
                                    for i in range(len(current.effects)) if i != j])
             try:
-                fit = ctx.fit(current.fitted_circuit(), keep, couplings=current.couplings)
+                fit = ctx.fit(circuit, keep, couplings=current.couplings)
                 res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
             except _CANDIDATE_FAILURES:  # the network degenerates without this effect: it stays
                 continue

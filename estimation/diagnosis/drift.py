@@ -9,6 +9,7 @@ the tolerance.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -108,3 +109,86 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
             log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
                 f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
     return kept
+
+
+#: Range (ratios to the design) and points of the scan of each value tried as the one off the design
+#: (:func:`located_drift`).
+LOCATE_RANGE = (0.25, 4.0)
+LOCATE_SCAN = 21
+#: Local fits of the most promising one-value hypotheses.
+LOCATE_FITS = 4
+
+
+def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str], None]) -> FitResult | None:
+    """The final model refitted with one design value off the design, if that alone explains the data.
+
+    Under the log-normal prior a value that is really off (a capacitance
+    doubled) is pulled back towards the design, and the fit spreads its
+    effect over several values within reach of the prior: a poor optimum
+    with the wrong values reported off. A local view of that optimum does
+    not see the other basin (freeing one value's prior there changes
+    nothing to first order), but the resonances do. Each value the prior
+    holds is scanned alone over ``LOCATE_RANGE`` times its design value
+    (``LOCATE_SCAN`` points, the other values at theirs) for how close it
+    brings the model's resonances to the measured ones
+    (:func:`.align.resonance_mismatch`). The ``LOCATE_FITS`` values that
+    align best are each aligned from their best ratio with the others
+    pulled towards the design (:func:`.align.aligned_start`) and fitted
+    locally, that value freed from its prior. The best is kept if it
+    reaches ``target`` (the noise margin) without gross drift of the values
+    still held, and beats the final model's BIC by ``DRIFT_MIN_DBIC``.
+
+    Returns
+    -------
+    FitResult or None
+        The refitted model (same structure and effects), or ``None``.
+    """
+    from .align import aligned_start, resonance_mismatch
+
+    t0 = time.perf_counter()
+    if ctx.prior is None:
+        return None
+    try:
+        fit = ctx.fit(final.fitted_circuit(), final.effects, couplings=final.couplings)
+    except CANDIDATE_FAILURES:
+        return None
+    cols = fit.anchored_columns
+    if not cols.size:
+        return None
+    x_design = fit.design_vector(np.concatenate([np.zeros(fit.nc), final.x[current_nc(final):]]))
+    # each value scanned alone (the others at their design values) for the resonances it alone can align
+    ratios = np.exp(np.linspace(np.log(LOCATE_RANGE[0]), np.log(LOCATE_RANGE[1]), LOCATE_SCAN))
+    X = np.repeat(x_design[None], cols.size * ratios.size, axis=0)
+    X[np.arange(X.shape[0]), np.repeat(cols, ratios.size)] += np.tile(np.log(ratios), cols.size)
+    mismatch = resonance_mismatch(fit, X).reshape(cols.size, ratios.size)
+    ranked = []
+    for p in np.argsort(mismatch.min(axis=1))[:LOCATE_FITS]:
+        i = cols[p]
+        x0 = X[p * ratios.size + int(np.argmin(mismatch[p]))]
+        aligned = aligned_start(fit, x0, free=[i])
+        ranked.append((float(mismatch[p].min()), p, x0 if aligned is None else aligned))
+    t_align = time.perf_counter() - t0
+    best = None
+    for _, p, x0 in ranked:
+        name = fit.free[cols[p]]
+        loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
+        try:
+            one = ctx.fit(final.fitted_circuit(), final.effects, prior=loose, couplings=final.couplings)
+            trial = one.fit_continued(x0, max_nfev=100, tol=1e-7)
+        except CANDIDATE_FAILURES:
+            continue
+        trial.freed = name
+        if best is None or trial.bic < best.bic:
+            best = trial
+    if best is None:
+        return None
+    held = [d for d in ctx.gross(best) if d["name"].lower() != best.freed.lower()]
+    dbic = final.bic - best.bic
+    ratio = best.values[best.freed] / ctx.prior.design[best.freed.lower()]
+    if best.objective > target or held or dbic < DRIFT_MIN_DBIC:
+        log(f"one value off the design: {best.freed} x{ratio:.3g} fits to {best.objective:.4g} (dBIC {dbic:.1f}): "
+            "not kept")
+        return None
+    log(f"one value off the design: {best.freed} x{ratio:.3g} explains the data (cost {final.objective:.4g} -> "
+        f"{best.objective:.4g}, dBIC {dbic:.1f}; {t_align:.1f} s aligning, {time.perf_counter() - t0:.1f} s in all)")
+    return best

@@ -327,6 +327,17 @@ class FrequencyFit:
         k = np.exp(-0.5 * ((lf[:, None] - lf[None, :]) / decades) ** 2)
         self._kernel = (k / k.sum(axis=1, keepdims=True)).T
 
+    @property
+    def anchored_columns(self) -> np.ndarray:
+        """Columns of the parameter vector whose values the design prior holds (empty without a prior)."""
+        return self._pidx
+
+    def design_vector(self, x: np.ndarray) -> np.ndarray:
+        """``x`` with every value the design prior holds set to its design value (effects' parameters kept)."""
+        out = np.array(x, float)
+        out[self._pidx] = -self._plog
+        return out
+
     def prior_residuals(self, X: np.ndarray) -> np.ndarray:
         """The design prior's residuals, shape ``(P, n_anchored)`` (squares sum to half the penalty, as the data's
         sum to half the cost)."""
