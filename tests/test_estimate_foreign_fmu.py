@@ -95,3 +95,7 @@ def test_foreign_fmu_estimated(built, tmp_path, name, noise, tol):
     worst = max(abs(e) for e in a["errors_percent"].values())
     assert worst < tol, (a["errors_percent"], a["convergence_reason"])
     assert a["fmu_simulations"] > 0 and all(r["runs_per_stage"] for r in a["restarts"])
+
+
+#: One worker runs this module under ``pytest -n 2 --dist loadgroup``: its module fixtures are computed once.
+pytestmark = pytest.mark.xdist_group("estimate_foreign_fmu")

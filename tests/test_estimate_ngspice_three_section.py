@@ -222,3 +222,7 @@ def test_three_section_1mhz_within_2pct_or_fisher_says_why(records):
     assert set(out["non_identifiable"]) == told, (sd, out["non_identifiable_reasons"])
     bad = {k: e for k, e in out["errors_percent"].items() if k not in told and not abs(e) < 2.0}
     assert not bad, (out["errors_percent"], out["convergence_reason"])
+
+
+#: One worker runs this module under ``pytest -n 2 --dist loadgroup``: its module fixtures are computed once.
+pytestmark = pytest.mark.xdist_group("estimate_ngspice_three_section")

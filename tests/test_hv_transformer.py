@@ -217,3 +217,7 @@ def test_lab_cli_rejects_a_one_port_model(tmp_path):
     assert main(["lab", "--model", "two-section", "--out", str(tmp_path / "x.csv")]) == 2
     assert main(["lab", "--configs", "LVXX", "--out", str(tmp_path / "x.csv")]) == 2
     assert not (tmp_path / "x.csv").exists()
+
+
+#: One worker runs this module under ``pytest -n 2 --dist loadgroup``: its module fixtures are computed once.
+pytestmark = pytest.mark.xdist_group("hv_transformer")

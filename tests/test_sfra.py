@@ -323,3 +323,7 @@ def test_touchstone_version_2_and_more_ports(tmp_path):
         np.testing.assert_allclose(ts.values, m, rtol=1e-12, atol=1e-15)
     with pytest.raises(MeasuredDataError, match=r"rc3\.s3p: a 3-port file where a 2-port file is needed"):
         load_sweep(tmp_path / "rc3.s3p")
+
+
+#: One worker runs this module under ``pytest -n 2 --dist loadgroup``: its module fixtures are computed once.
+pytestmark = pytest.mark.xdist_group("sfra")

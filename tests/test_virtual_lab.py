@@ -225,3 +225,7 @@ def test_bad_arguments(model):
         vl.perturb(model, "LVOC", "high", st)
     with pytest.raises(ValueError, match="clock"):
         vl.LabSettings().source(model.configuration("LVOC"), "medium")  # type: ignore[arg-type]
+
+
+#: One worker runs this module under ``pytest -n 2 --dist loadgroup``: its module fixtures are computed once.
+pytestmark = pytest.mark.xdist_group("virtual_lab")
