@@ -121,6 +121,8 @@ class Diagnosis:
     failed: list[dict[str, Any]] = field(default_factory=list)
     drift: list[dict[str, Any]] = field(default_factory=list)
     baseline_drift: list[dict[str, Any]] = field(default_factory=list)
+    #: Other values off the design that explain the data as well as the one reported (:func:`.drift.located_drift`).
+    drift_alternatives: list[dict[str, Any]] = field(default_factory=list)
     tolerance: float = float("inf")
 
     @property
@@ -158,6 +160,7 @@ class Diagnosis:
             "tolerance": self.tolerance,
             "drift": list(self.drift),
             "baseline_drift": list(self.baseline_drift),
+            "drift_alternatives": list(self.drift_alternatives),
             "noise_floor": self.noise.get("cost", 0.0),
             "noise": self.noise,
             "unexplained": self.unexplained,
@@ -505,6 +508,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     diag.tolerance = float(tolerance) if prior is not None else float("inf")
     diag.drift = relaxed_drift(ctx, final, lambda m: _log(m, progress))
     diag.baseline_drift = ctx.drift(baseline)
+    diag.drift_alternatives = list(getattr(final, "drift_alternatives", []))
     if diag.drift:
         _log("values beyond the design tolerance in the final model: "
              + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift),

@@ -136,7 +136,11 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     pulled towards the design (:func:`.align.aligned_start`) and fitted
     locally, that value freed from its prior. The best is kept if it
     reaches ``target`` (the noise margin) without gross drift of the values
-    still held, and beats the final model's BIC by ``DRIFT_MIN_DBIC``.
+    still held, and beats the final model's BIC by ``DRIFT_MIN_DBIC``. The
+    other values fitted that reach ``target`` too, with a BIC within
+    ``DRIFT_MIN_DBIC`` of it, are kept as ``drift_alternatives`` (name,
+    design, fitted, ratio, delta_bic): a driving-point impedance may not
+    tell which of two values far apart in a winding changed.
 
     Returns
     -------
@@ -168,7 +172,7 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
         aligned = aligned_start(fit, x0, free=[i])
         ranked.append((float(mismatch[p].min()), p, x0 if aligned is None else aligned))
     t_align = time.perf_counter() - t0
-    best = None
+    best, trials = None, []
     for _, p, x0 in ranked:
         name = fit.free[cols[p]]
         loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
@@ -178,6 +182,7 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
         except CANDIDATE_FAILURES:
             continue
         trial.freed = name
+        trials.append(trial)
         if best is None or trial.bic < best.bic:
             best = trial
     if best is None:
@@ -189,6 +194,16 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
         log(f"one value off the design: {best.freed} x{ratio:.3g} fits to {best.objective:.4g} (dBIC {dbic:.1f}): "
             "not kept")
         return None
+    # another value that explains the data as well (the BIC within DRIFT_MIN_DBIC): the data do not tell which
+    best.drift_alternatives = []
+    for t in sorted(trials, key=lambda t: t.bic):
+        if t is best or t.objective > target or t.bic - best.bic >= DRIFT_MIN_DBIC or any(
+                d["name"].lower() != t.freed.lower() for d in ctx.gross(t)):
+            continue
+        d = ctx.prior.design[t.freed.lower()]
+        best.drift_alternatives.append({"name": t.freed, "design": float(d), "fitted": float(t.values[t.freed]),
+                                        "ratio": float(t.values[t.freed] / d), "delta_bic": float(t.bic - best.bic)})
+        log(f"  as well explained by {t.freed} x{t.values[t.freed] / d:.3g} (dBIC {t.bic - best.bic:.1f})")
     log(f"one value off the design: {best.freed} x{ratio:.3g} explains the data (cost {final.objective:.4g} -> "
         f"{best.objective:.4g}, dBIC {dbic:.1f}; {t_align:.1f} s aligning, {time.perf_counter() - t0:.1f} s in all)")
     return best

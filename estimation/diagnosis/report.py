@@ -86,6 +86,11 @@ def drift_lines(data: dict) -> list[str]:
                   "| value | design | fitted | ratio |", "|---|---|---|---|"]
         lines += [f"| {d['name']} | {_fmt(d['design'])} | {_fmt(d['fitted'])} | {d['ratio']:.3g} |" for d in drift]
         lines.append("")
+        alt = data.get("drift_alternatives") or []
+        if alt:
+            lines += ["The data are explained as well by one of these values off instead (one at a time; the "
+                      "response measured does not tell which): "
+                      + ", ".join(f"{d['name']} x{d['ratio']:.3g} (BIC +{d['delta_bic']:.1f})" for d in alt) + ".", ""]
     base = data.get("baseline_drift") or []
     if base and data.get("causes"):
         lines += ["Without the causes named, the baseline needed: "
