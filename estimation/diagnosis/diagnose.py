@@ -482,14 +482,18 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             _log("selection again without " + ", ".join(c for c in chosen if c in STRUCTURAL), progress)
             alt_failed: list[dict[str, Any]] = []
             alt = _select(ctx, baseline, alt_pool, results, variants_tried, alt_failed, **opts)
-            if alt[1] and alt[0].bic < current.bic:
+            # kept when it is better both ways: a lower BIC and a data cost no higher (under the prior, a model
+            # that fits the data worse can win the BIC on the penalty of the values a section moved)
+            if alt[1] and alt[0].bic < current.bic and alt[0].cost <= current.cost:
                 _log(f"{', '.join(alt[1])} without the section: BIC lower by {current.bic - alt[0].bic:.1f} "
-                     f"than {', '.join(chosen)}: kept", progress)
+                     f"than {', '.join(chosen)}, cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against "
+                     f"{current.cost:.4g} + {current.penalty:.4g}: kept", progress)
                 current, chosen, steps = alt
                 failed += alt_failed
             else:
-                _log(f"without the section ({', '.join(alt[1]) or 'none'}): BIC higher by "
-                     f"{alt[0].bic - current.bic:.1f}: the section stays", progress)
+                _log(f"without the section ({', '.join(alt[1]) or 'none'}): BIC {alt[0].bic - current.bic:+.1f}, "
+                     f"cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against {current.cost:.4g} + {current.penalty:.4g}: the "
+                     "section stays", progress)
     extended = current if chosen else None
     # ---- a value of the design really off: one value freed may explain what the prior's spread-out fit leaves
     if prior is not None and not ctx.explained(extended or baseline):
