@@ -117,8 +117,8 @@ def resonance_mismatch(fit: FrequencyFit, X: np.ndarray) -> np.ndarray:
     return out
 
 
-def aligned_start(fit: FrequencyFit, x0: np.ndarray, max_nfev: int = ALIGN_NFEV, free: Sequence[int] = (),
-                  with_cost: bool = False) -> np.ndarray | tuple[np.ndarray, float] | None:
+def aligned_start(fit: FrequencyFit, x0: np.ndarray, max_nfev: int = ALIGN_NFEV, free: Sequence[int] = ()
+                  ) -> np.ndarray | None:
     """``x0`` with its circuit values moved so that the port impedances' resonances fall on the measured ones.
 
     Parameters
@@ -132,15 +132,12 @@ def aligned_start(fit: FrequencyFit, x0: np.ndarray, max_nfev: int = ALIGN_NFEV,
     free : sequence of int
         Circuit columns not pulled towards ``x0`` (a value tried as off the
         design).
-    with_cost : bool
-        Also return what is left of the alignment (half the sum of squared
-        log distances, pull included).
 
     Returns
     -------
-    numpy.ndarray, (numpy.ndarray, float) or None
-        The aligned vector (and its cost); ``None`` when no measured
-        resonance is found or the alignment moves no resonance closer.
+    numpy.ndarray or None
+        The aligned vector; ``None`` when no measured resonance is found or
+        the alignment moves no resonance closer.
     """
     f = fit.f
     targets = _targets(fit)
@@ -169,6 +166,5 @@ def aligned_start(fit: FrequencyFit, x0: np.ndarray, max_nfev: int = ALIGN_NFEV,
         return None
     if not np.isfinite(sol.cost) or sol.cost >= 0.5 * float(r0 @ r0):
         return None
-    x = np.concatenate([sol.x, np.asarray(x0, float)[fit.nc:]])
-    return (x, float(sol.cost)) if with_cost else x
+    return np.concatenate([sol.x, np.asarray(x0, float)[fit.nc:]])
 

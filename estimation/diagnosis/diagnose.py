@@ -546,7 +546,7 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
             ) -> tuple[FitResult, list[str], list[dict[str, Any]]]:
     """Forward selection by BIC from ``baseline`` over the candidates in ``pool``, then the backward check and the
     forms chosen again: the final model, the causes named and the steps (``failed`` gets the refused ones)."""
-    progress, floor, prior, weights = ctx.progress, {"cost": ctx.floor}, ctx.prior, ctx.weights
+    progress, prior, weights = ctx.progress, ctx.prior, ctx.weights
     configs, f, data, fixed, impedance_scale = ctx.configs, ctx.f, ctx.data, ctx.fixed, ctx.scale
     pool = dict(pool)
     current, chosen, steps, deferred = baseline, [], [], set()
@@ -560,7 +560,7 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
         # candidate that reaches the noise within the design, or with fewer values far off (a value really off the
         # design stays off in every model), needs the BIC margin but no share of the cost
         if ctx.distorted(current) and (ctx.explained(best) or (
-                best.objective <= NOISE_MARGIN * floor["cost"] and len(ctx.gross(best)) < len(ctx.gross(current)))):
+                best.objective <= NOISE_MARGIN * ctx.floor and len(ctx.gross(best)) < len(ctx.gross(current)))):
             need = 0.0
         if not significant(current.bic, current.objective, best.bic, best.objective, min_delta_bic, need):
             break
@@ -568,20 +568,20 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
         new_cause = new_causes[-1] if any(c in STRUCTURAL for c in new_causes) and len(new_causes) > 1 else \
             new_causes[0]
         if new_cause in STRUCTURAL:
-            if getattr(best, "from_design", False) and best.objective > UNMERGE_ABOVE_FLOOR * floor["cost"]:
+            if getattr(best, "from_design", False) and best.objective > UNMERGE_ABOVE_FLOOR * ctx.floor:
                 _refuse(pool, failed, best, new_cause, progress,
                         f"a split of the design values that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise",
                         "a split of the design values with its couplings free, and the fit with it stays far above "
                         "the noise")
                 continue
-            if not chosen and best.couplings and best.objective > UNMERGE_ABOVE_FLOOR * floor["cost"]:
+            if not chosen and best.couplings and best.objective > UNMERGE_ABOVE_FLOOR * ctx.floor:
                 _refuse(pool, failed, best, new_cause, progress,
                         f"a first cause with free couplings that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise",
                         "a new section with its couplings free named first, and the fit with it stays far above "
                         "the noise (free couplings take the share of a frequency-dependent effect)")
                 deferred.add(new_cause)  # not first: tried again once another cause is named
                 continue
-            if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * floor["cost"]
+            if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * ctx.floor
                     and not missing_modes(f, data, current.predicted, ctx.resolved)):
                 _refuse(pool, failed, best, new_cause, progress,
                         "the model without it has every measured resonance and the split does not reach the noise",

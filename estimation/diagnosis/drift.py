@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from .align import aligned_start, resonance_mismatch
 from .fit import CANDIDATE_FAILURES, FitResult, current_nc
 
 #: A fit that reaches the noise floor but moves a value more than this many tolerances from the design
@@ -147,11 +148,9 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     FitResult or None
         The refitted model (same structure and effects), or ``None``.
     """
-    from .align import aligned_start, resonance_mismatch
-
-    t0 = time.perf_counter()
     if ctx.prior is None:
         return None
+    t0 = time.perf_counter()
     try:
         fit = ctx.fit(final.fitted_circuit(), final.effects, couplings=final.couplings)
     except CANDIDATE_FAILURES:
@@ -165,15 +164,18 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     X = np.repeat(x_design[None], cols.size * ratios.size, axis=0)
     X[np.arange(X.shape[0]), np.repeat(cols, ratios.size)] += np.tile(np.log(ratios), cols.size)
     mismatch = resonance_mismatch(fit, X).reshape(cols.size, ratios.size)
-    ranked = []
+    starts = []
     for p in np.argsort(mismatch.min(axis=1))[:LOCATE_FITS]:
-        i = cols[p]
         x0 = X[p * ratios.size + int(np.argmin(mismatch[p]))]
-        aligned = aligned_start(fit, x0, free=[i])
-        ranked.append((float(mismatch[p].min()), p, x0 if aligned is None else aligned))
+        aligned = aligned_start(fit, x0, free=[cols[p]])
+        starts.append((p, x0 if aligned is None else aligned))
     t_align = time.perf_counter() - t0
+
+    def others_gross(t: FitResult) -> bool:  # a value besides the freed one more than GROSS_DRIFT tolerances off
+        return any(d["name"].lower() != t.freed.lower() for d in ctx.gross(t))
+
     best, trials = None, []
-    for _, p, x0 in ranked:
+    for p, x0 in starts:
         name = fit.free[cols[p]]
         loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
         try:
@@ -187,18 +189,16 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
             best = trial
     if best is None:
         return None
-    held = [d for d in ctx.gross(best) if d["name"].lower() != best.freed.lower()]
     dbic = final.bic - best.bic
     ratio = best.values[best.freed] / ctx.prior.design[best.freed.lower()]
-    if best.objective > target or held or dbic < DRIFT_MIN_DBIC:
+    if best.objective > target or others_gross(best) or dbic < DRIFT_MIN_DBIC:
         log(f"one value off the design: {best.freed} x{ratio:.3g} fits to {best.objective:.4g} (dBIC {dbic:.1f}): "
             "not kept")
         return None
     # another value that explains the data as well (the BIC within DRIFT_MIN_DBIC): the data do not tell which
     best.drift_alternatives = []
     for t in sorted(trials, key=lambda t: t.bic):
-        if t is best or t.objective > target or t.bic - best.bic >= DRIFT_MIN_DBIC or any(
-                d["name"].lower() != t.freed.lower() for d in ctx.gross(t)):
+        if t is best or t.objective > target or t.bic - best.bic >= DRIFT_MIN_DBIC or others_gross(t):
             continue
         d = ctx.prior.design[t.freed.lower()]
         best.drift_alternatives.append({"name": t.freed, "design": float(d), "fitted": float(t.values[t.freed]),
