@@ -242,15 +242,18 @@ class _Context:
         """No further cause is sought after ``r``: it fits to the noise floor (at or below the data's; within
         ``NOISE_MARGIN`` of :meth:`residual_floor` with white residuals, :func:`.evidence.residuals_white`) without moving
         any value more than ``GROSS_DRIFT`` tolerances, or it has a new section (which shares the winding's values out
-        anew, so values off the design are its own) and fits to the noise floor."""
+        anew, so values off the design are its own), fits to the noise floor and, on one-port data, leaves white
+        residuals."""
         # at or below the data's own floor (an overestimate on a resonant winding) the fit is at the noise anyway;
         # within the margin above it, only if what is left looks like noise (white along frequency)
         # (one-port data only, as the residuals' floor: on several responses a few per cent of structure left in a
         # near-noise fit is the rule, and every extension of a six-response model costs tens of seconds)
-        if r.objective > self.floor and (r.objective > NOISE_MARGIN * self.residual_floor(r)
-                                         or (self.one_port and not self.weights and not residuals_white(r.errors))):
+        white = None if not self.one_port or self.weights else residuals_white(r.errors)
+        if r.objective > self.floor and (r.objective > NOISE_MARGIN * self.residual_floor(r) or white is False):
             return False
-        return bool(r.structure) or not self.distorted(r)
+        # a new section with values grossly off the design is at the noise only if what is left looks like noise:
+        # the values moved make up for something else (an effect whose share the drift took)
+        return not self.distorted(r) or (bool(r.structure) and white is not False)
 
     def residual_floor(self, r: FitResult) -> float:
         """The noise floor estimated from the third differences of ``r``'s residuals, if below the data's.
