@@ -21,6 +21,7 @@ from pris_cosim.measured import MeasuredResponses, read_response_csv, write_resp
 from pris_cosim.models import get_model
 
 from conftest import needs_ngspice
+from readme_commands import readme_command, run_readme_command
 
 
 # ---------------------------------------------------------------------- the truth model
@@ -145,14 +146,14 @@ def test_bad_measured_data_give_one_line_errors(tmp_path):
 # ---------------------------------------------------------------------- the study, end to end
 @pytest.fixture(scope="module")
 def quick_study(tmp_path_factory):
-    out = tmp_path_factory.mktemp("hv") / "study"
-    import contextlib
-    import io
-
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf):
-        assert main(["study", "hv-transformer", "--quick", "--json", "--out", str(out)]) == 0
-    return out, json.loads(buf.getvalue())
+    """The README's quick study, run as written from a directory holding only the shipped data."""
+    cmd = readme_command("pris-cosim study hv-transformer --quick")
+    assert "--json" in cmd and "--out results/hv" in cmd
+    cwd = tmp_path_factory.mktemp("hv")
+    proc = run_readme_command(cmd, cwd)
+    assert proc.returncode == 0, f"{cmd}\n{proc.stderr[-3000:]}"
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    return cwd / "results" / "hv", json.loads(proc.stdout)
 
 
 @pytest.mark.slow
