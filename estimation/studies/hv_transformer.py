@@ -748,7 +748,9 @@ def run(quick: bool = False, out: str | Path = "study-hv-transformer", scheduler
         data, source = lab_data(out, quick, seed, progress)
         band = comparison_data(str(data), ppd)[0]
         truth_values = dict(TABLES["passive-6"])
-    tasks = make_tasks(str(data), quick, chosen, ppd)
+    # the tasks name the data by its absolute path: a run resumed with the same folder spelled otherwise (relative,
+    # absolute) finds its stored runs
+    tasks = make_tasks(str(Path(data).resolve()), quick, chosen, ppd)
     results = common.run_study(NAME, tasks, out, scheduler, workers, progress)
     rows = []
     for case in chosen:
