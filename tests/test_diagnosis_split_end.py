@@ -78,3 +78,18 @@ def test_prior_frees_the_start_nodes_capacitance_only_when_a_capacitance_is_adde
     plain = split_section(c, chain, len(chain.sections) - 1, coupling_decay(c, [chain], c.resolve(check=False)), 1.0)
     assert not any(e.kind == "C" and "0" not in e.nodes and e.name in plain.new_elements for e in plain.circuit.elements)
     assert {"c3", "cg3"} <= prior.anchored(plain.circuit)
+
+
+def test_first_seed_of_a_split_is_the_plain_split():
+    """Equal halves, the series capacitance shared equally, the shunt as built: the candidate's own values, but for
+    one common factor on the two halves' inductances (which keeps the section's total inductance)."""
+    c = parse_netlist(NET)
+    chain = find_chains(c, ["n1"])[0]
+    um = Unmerged(c, chain, 1)
+    free = [n.lower() for n in _free(um.candidate.circuit)]
+    rows = um.seeds(free, np.zeros(0))
+    halves = [free.index(um.first["L"].lower()), free.index(um.second["L"].lower())]
+    others = [i for i in range(len(free)) if i not in halves]
+    assert np.allclose(rows[0][others], 0.0, atol=1e-12)
+    assert rows[0][halves[0]] == pytest.approx(rows[0][halves[1]], abs=1e-12)
+    assert not any(np.allclose(r[others], 0.0, atol=1e-12) for r in rows[1:])

@@ -301,7 +301,11 @@ class Unmerged:
         pair = np.array([n in (self.first["L"].lower(), self.second["L"].lower()) for n in names])
         has_c = self.first["C"] is not None and self.second["C"] is not None
         rows = []
-        for a, cr, cg in itertools.product(fractions, cap_ratios if has_c else (1.0,), shunts if self.shunt else (1.0,)):
+        # first the plain split (equal halves, equal capacitances, the shunt as built): the seed of a design whose
+        # merged section was two alike
+        plain = [(0.5, 1.0, 1.0)]
+        for a, cr, cg in plain + [p for p in itertools.product(fractions, cap_ratios if has_c else (1.0,),
+                                                                shunts if self.shunt else (1.0,)) if p not in plain]:
             x = np.zeros(len(free))
             l1, l2 = float(v[self.first["L"].lower()]) * 2 * a, float(v[self.second["L"].lower()]) * 2 * (1 - a)
             M = inductance_matrix(c.with_values({self.first["L"]: l1, self.second["L"]: l2}), names)
@@ -411,6 +415,7 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
                           for i in range(len(rows))])
         pick = list(np.lexsort((cost, score))[:by_resonance])
         pick += [i for i in np.argsort(cost) if i not in pick][:by_cost]
+        pick += [] if 0 in pick else [0]  # the plain split (:meth:`Unmerged.seeds`' first) is always fitted
         for i in pick:
             try:
                 res = fit.fit(x0s=rows[i][None], grid=False, max_nfev=screen_nfev, tol=1e-6)
