@@ -203,6 +203,8 @@ class _Context:
     progress: bool
     nominal: Circuit | None = None
     floor: float = 0.0
+    #: Noise RMS of each response's log error (:func:`.evidence.noise_floor` ``per_response``).
+    noise: dict[str, float] = field(default_factory=dict)
     prior: DesignPrior | None = None
     #: Per-point residual weights by response (:func:`.evidence.noise_weights`); empty: unweighted.
     weights: dict[str, np.ndarray] = field(default_factory=dict)
@@ -401,6 +403,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     ctx = _Context(f, data, configs, fixed, impedance_scale, one_port, progress,
                    nominal=model.circuit if model.family != ("lumped",) else None)
     ctx.floor = floor["cost"]
+    ctx.noise = dict(floor["per_response"])
     ctx.prior = prior
     ctx.weights = weights
     ctx.resolved = resolved_points(sd)
@@ -473,6 +476,28 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             pool[pair.cause] = pair
             _log(f"pair {pair.cause}: cost {pair.cost:.4g}, gain {1 - pair.objective / baseline.objective:.3f}, "
                  f"dBIC {baseline.bic - pair.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
+    # ---- pairs the other way round, on one port: the split found alone, with each continuous effect added and all
+    # refitted (from the split's values and from the design's), when the split is not at the noise on its own (its
+    # free values took a share of the effect, and the held-out check may refuse it alone)
+    split = results.get("missing-section")
+    if (ctx.one_port and split is not None and max_causes >= 2 and not ctx.settled(split)
+            and not any(ctx.explained(r) for r in results.values())):
+        for cause, single in results.items():
+            if cause in STRUCTURAL or not single.effects or f"{cause}+missing-section" in pool:
+                continue
+            t = time.perf_counter()
+            try:
+                pair = _extend(ctx, split, cause, single, variants_tried.get(cause, []))
+            except _CANDIDATE_FAILURES:
+                pair = None
+            if pair is None or pair.objective >= split.objective:
+                continue
+            pair.causes = [cause, "missing-section"]  # the structural cause last, as in every pair
+            pair.cause = "+".join(pair.causes)
+            pool[pair.cause] = pair
+            _log(f"pair {pair.cause} (from the split): cost {pair.cost:.4g}, gain "
+                 f"{1 - pair.objective / baseline.objective:.3f}, dBIC {baseline.bic - pair.bic:.1f} "
+                 f"({time.perf_counter() - t:.1f} s)", progress)
 
     # ---- forward selection, then a backward check; a section named with other causes is checked against the
     # selection without it (a section's free values take a share of any effect, and a greedy first step that names
@@ -591,9 +616,15 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
                         "no measured resonance missing from the model without it, and the fit with it stays above "
                         "the noise")
                 continue
+            # a pair (effect and section fitted together) is held out against the effect alone: the section must
+            # add to it on points it was not fitted to (against the model before, the effect's share passes it)
+            before = current
+            alone = results.get(new_causes[0]) if len(new_causes) == 2 else None
+            if alone is not None and alone.objective < current.objective:
+                before = alone
             try:
-                held = held_out_gain(current, best, configs, f, data, fixed, impedance_scale, weights=weights,
-                                     max_nfev=HOLDOUT_NFEV, prior=prior)
+                held = held_out_gain(before, best, configs, f, data, fixed, impedance_scale, weights=weights,
+                                     max_nfev=HOLDOUT_NFEV, prior=prior, noise=ctx.noise)
             except _CANDIDATE_FAILURES:
                 held = -np.inf
             if held < need:
