@@ -480,7 +480,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # refitted (from the split's values and from the design's), when the split is not at the noise on its own (its
     # free values took a share of the effect, and the held-out check may refuse it alone)
     split = results.get("missing-section")
-    if (ctx.one_port and split is not None and max_causes >= 2 and not ctx.settled(split)
+    if (PAIRS_FROM_SPLIT and ctx.one_port and split is not None and max_causes >= 2 and not ctx.settled(split)
             and not any(ctx.explained(r) for r in results.values())):
         for cause, single in results.items():
             if cause in STRUCTURAL or not single.effects or f"{cause}+missing-section" in pool:
@@ -679,6 +679,11 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
 
 
 # ============================================================================== fitting causes
+#: Pairs formed from the split's own fit (:func:`_diagnose`). Off: formed from the split of the best single split,
+#: a pair stops at a neighbouring section with values far off the design, where the effect named first and the
+#: split sought with it reach the right section (design missing section + skin effect 700).
+PAIRS_FROM_SPLIT = False
+
 #: Evaluations of each refit of the held-out check (:mod:`.holdout`): converged, so the check does not depend on
 #: where a short refit stopped.
 HOLDOUT_NFEV = 100
