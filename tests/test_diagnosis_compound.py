@@ -108,12 +108,7 @@ def test_missing_section_of_two_alike_sections_is_named():
     """Sections 3 and 4 of six merged, their values alike: the baseline stops at 2.4 x the floor with Cg3 at 2.4 x
     its design value. Only the plain split of the design (equal halves, equal capacitances) leads a local fit to the
     noise; the seeds that shared the capacitance unequally stopped at 7.6e-5, and the answer was `none`."""
-    case, d = _diagnose(("missing-section",), 703)
-    assert case.truth["merged_sections"] == (3, 4)
-    assert d.causes == ["missing-section"], d.steps
-    assert "section 3 " in d.best.structure, d.best.structure
-    assert d.drift == [], d.drift
-    assert d.best.cost <= 1.25 * d.noise["cost"]
+    _section_named_at_the_noise(703, merged=(3, 4))
 
 
 @pytest.mark.slow
@@ -123,9 +118,15 @@ def test_missing_section_held_out_past_a_sharp_resonance():
     a sharp resonance by a fraction of a per cent, and one held-out point near its peak outweighed the split's gain
     on all the others: held-out gain -0.02, refused, answer `none` with three values reported off the design. Each
     held-out point now counts at most 5 noise standard deviations."""
-    case, d = _diagnose(("missing-section",), 706)
-    assert case.truth["merged_sections"] == (3, 4)
+    _section_named_at_the_noise(706, merged=(3, 4))
+
+
+def _section_named_at_the_noise(seed, merged):
+    """Design case ``seed`` with a missing section: the split of the merged sections named alone, at the noise, with
+    no value off the design."""
+    case, d = _diagnose(("missing-section",), seed)
+    assert case.truth["merged_sections"] == merged
     assert d.causes == ["missing-section"], d.steps
-    assert "section 3 " in d.best.structure, d.best.structure
+    assert f"section {merged[0]} " in d.best.structure, d.best.structure
     assert d.drift == [], d.drift
     assert d.best.cost <= 1.25 * d.noise["cost"]

@@ -476,28 +476,6 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             pool[pair.cause] = pair
             _log(f"pair {pair.cause}: cost {pair.cost:.4g}, gain {1 - pair.objective / baseline.objective:.3f}, "
                  f"dBIC {baseline.bic - pair.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
-    # ---- pairs the other way round, on one port: the split found alone, with each continuous effect added and all
-    # refitted (from the split's values and from the design's), when the split is not at the noise on its own (its
-    # free values took a share of the effect, and the held-out check may refuse it alone)
-    split = results.get("missing-section")
-    if (PAIRS_FROM_SPLIT and ctx.one_port and split is not None and max_causes >= 2 and not ctx.settled(split)
-            and not any(ctx.explained(r) for r in results.values())):
-        for cause, single in results.items():
-            if cause in STRUCTURAL or not single.effects or f"{cause}+missing-section" in pool:
-                continue
-            t = time.perf_counter()
-            try:
-                pair = _extend(ctx, split, cause, single, variants_tried.get(cause, []))
-            except _CANDIDATE_FAILURES:
-                pair = None
-            if pair is None or pair.objective >= split.objective:
-                continue
-            pair.causes = [cause, "missing-section"]  # the structural cause last, as in every pair
-            pair.cause = "+".join(pair.causes)
-            pool[pair.cause] = pair
-            _log(f"pair {pair.cause} (from the split): cost {pair.cost:.4g}, gain "
-                 f"{1 - pair.objective / baseline.objective:.3f}, dBIC {baseline.bic - pair.bic:.1f} "
-                 f"({time.perf_counter() - t:.1f} s)", progress)
 
     # ---- forward selection, then a backward check; a section named with other causes is checked against the
     # selection without it (a section's free values take a share of any effect, and a greedy first step that names
@@ -679,11 +657,6 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
 
 
 # ============================================================================== fitting causes
-#: Pairs formed from the split's own fit (:func:`_diagnose`). Off: formed from the split of the best single split,
-#: a pair stops at a neighbouring section with values far off the design, where the effect named first and the
-#: split sought with it reach the right section (design missing section + skin effect 700).
-PAIRS_FROM_SPLIT = False
-
 #: Evaluations of each refit of the held-out check (:mod:`.holdout`): converged, so the check does not depend on
 #: where a short refit stopped.
 HOLDOUT_NFEV = 100
