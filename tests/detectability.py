@@ -21,7 +21,9 @@ section are left out of both sides (they are not what is being asked about).
 A fit that fails to get there leaves the case counted as detectable, so the
 count of undetectable cases is a lower bound. The other effect of a compound
 case with a missing section is asked about the same way, with the truth's
-own sections (the section given) fitted to the whole truth.
+own sections (the section given) fitted to the whole truth; so is one effect
+of a compound of two, with the truth's sections and the other effect, in the
+truth's own form and parameters, fitted to the whole truth.
 """
 
 from __future__ import annotations
@@ -39,8 +41,8 @@ def _responses(net: rs.Net, kind: str, f: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target: str = "sections",
-                      bound: float = float(np.log(100.0)), free: tuple[str, ...] = (), structure: str = "baseline"
-                      ) -> dict[str, float]:
+                      bound: float = float(np.log(100.0)), free: tuple[str, ...] = (), structure: str = "baseline",
+                      keep: str | None = None) -> dict[str, float]:
     """Fit of the baseline's structure to the truth (no noise).
 
     Parameters
@@ -67,6 +69,12 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
         own sections (a missing section given), from their values, so that
         ``target="truth"`` asks whether the other effects of a compound case
         are detectable once the section is there.
+    keep : str, optional
+        With ``structure="sections"``: the truth's sections with this one
+        hidden effect written in as the truth has it (``nets["only:CAUSE"]``
+        of a one-port or design case), values free, so that
+        ``target="truth"`` asks whether the compound's other effect can be
+        told apart once this one is in the model.
 
     Returns
     -------
@@ -76,14 +84,16 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
     """
     f = case.frequency_hz
     truth = _responses(case.nets[target], case.kind, f)
-    home = case.nets["sections" if structure == "sections" else "merged"]
+    home = case.nets[(f"only:{keep}" if keep else "sections") if structure == "sections" else "merged"]
     names = [e[0] for e in (home if structure == "sections" else case.nets["baseline"]).elements
              if e[0][0].upper() in "RLC"]
 
     def net_of(start: rs.Net, x: np.ndarray) -> rs.Net:
         net = start.copy()
         for n, v in zip(names, x):
-            net.set(n, net.get(n)[3] * np.exp(v))
+            value = net.get(n)[3]
+            # a frequency-dependent value (an effect written in) keeps its shape, scaled
+            net.set(n, (lambda f, g=value, k=np.exp(v): k * g(f)) if callable(value) else value * np.exp(v))
         return net
 
     def errors(start: rs.Net, x: np.ndarray) -> dict[str, np.ndarray]:

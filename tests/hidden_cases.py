@@ -91,7 +91,7 @@ class HiddenCase:
     truth: dict = field(default_factory=dict)
     #: Networks kept for labelling (:mod:`detectability`): ``truth`` (with its frequency-dependent effects),
     #: ``sections`` (the truth's sections without them), ``baseline`` and ``merged`` (the baseline before and
-    #: without its jitter).
+    #: without its jitter); one-port and design cases: ``only:CAUSE``, the sections with that one effect.
     nets: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -207,7 +207,7 @@ def one_port_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003
     nets["merged"] = _cascade(Rb, Lb, Cb, Cgb, kb)
     base_net = _cascade(jit(Rb), jit(Lb), jit(Cb), jit(Cgb), kb)
     nets["baseline"] = base_net.copy()
-    _one_port_effects(truth_net, causes, rng, f, truth)
+    _alone(nets, _one_port_effects(truth_net, causes, rng, f, truth))
     nets["truth"] = truth_net
     z = rs.impedance(truth_net, "n1", f)
     return HiddenCase("one-port", causes, seed, noise, f, {"Zin": _noisy(z, noise, rng)},
@@ -216,30 +216,56 @@ def one_port_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003
 
 
 def _one_port_effects(truth_net: rs.Net, causes: tuple[str, ...], rng: np.random.Generator, f: np.ndarray,
-                      truth: dict) -> None:
-    """Skin effect, magnetising change and core loss written into a cascade (in place)."""
+                      truth: dict) -> dict[str, callable]:
+    """Skin effect, magnetising change and core loss written into a cascade (in place).
+
+    Returns each cause's writing (a function of a net), so that one effect
+    can be written alone into another net with the same parameters.
+    """
+    write: dict[str, callable] = {}
     if "skin-effect" in causes:
         kind = str(rng.choice(["bessel", "sqrt", "thesis"]))
         f_s = float(10 ** rng.uniform(4.0, 5.0))
-        g = skin_factor(kind, f_s, float(rng.uniform(0.4, 0.8)))
-        for name in truth_net.names("R"):
-            truth_net.set(name, _scaled(truth_net.get(name)[3], g))
-        truth["skin"] = {"kind": kind, "f_s": f_s}
+        extra = float(rng.uniform(0.4, 0.8))
+        g = skin_factor(kind, f_s, extra)
+
+        def skin(net: rs.Net, g=g) -> None:
+            for name in net.names("R"):
+                net.set(name, _scaled(net.get(name)[3], g))
+        write["skin-effect"] = skin
+        truth["skin"] = {"kind": kind, "f_s": f_s, "extra": extra}
     if "magnetising-inductance" in causes:
         kind = str(rng.choice(["relax", "power"]))
         beta = float(rng.uniform(0.04, 0.12))
         f_m = float(10 ** rng.uniform(4, 6)) if kind == "relax" else 1e3
         g = permeability(kind, f_m, beta)
-        for name in truth_net.names("L"):
-            truth_net.set(name, _scaled(truth_net.get(name)[3], g))
+
+        def magnetising(net: rs.Net, g=g) -> None:
+            for name in net.names("L"):
+                net.set(name, _scaled(net.get(name)[3], g))
+        write["magnetising-inductance"] = magnetising
         truth["magnetising"] = {"kind": kind, "f_m": f_m, "beta": beta}
+    for cause in ("skin-effect", "magnetising-inductance"):
+        if cause in write:
+            write[cause](truth_net)
     if "core-loss" in causes:
         kind = str(rng.choice(["real", "eddy"]))
         zmax = float(np.max(np.abs(rs.impedance(truth_net, "n1", f))))
         r_hf = zmax * 10 ** rng.uniform(-0.3, 0.3)
         f_b = float(10 ** rng.uniform(4.5, 6))
-        truth_net.add("Rcore_hidden", "n1", "0", core_resistance(kind, r_hf, f_b))
+        rc = core_resistance(kind, r_hf, f_b)
+        write["core-loss"] = lambda net, rc=rc: net.add("Rcore_hidden", "n1", "0", rc)
+        write["core-loss"](truth_net)
         truth["core"] = {"kind": kind, "r_hf": r_hf, "f_b": f_b}
+    return write
+
+
+def _alone(nets: dict, write: dict[str, callable]) -> None:
+    """``nets["only:CAUSE"]``: the truth's sections with that one hidden effect (its parameters as in the truth)."""
+    for cause, w in write.items():
+        net = nets["sections"].copy()
+        w(net)
+        nets[f"only:{cause}"] = net
 
 
 DESIGN_SPREAD = 0.10  # the truth's values are the design's within 10 %
@@ -284,7 +310,7 @@ def design_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003, 
         truth["drift"] = [f"C{j + 1}"]  # (with a missing section, the name of the winding's section)
     truth_net = _cascade(Rt, Lt, Ct, Cgt, k)
     nets = {"baseline": design.copy(), "merged": design.copy(), "sections": truth_net.copy()}
-    _one_port_effects(truth_net, causes, rng, f, truth)
+    _alone(nets, _one_port_effects(truth_net, causes, rng, f, truth))
     nets["truth"] = truth_net
     z = rs.impedance(truth_net, "n1", f)
     return HiddenCase("design", causes, seed, noise, f, {"Zin": _noisy(z, noise, rng)},

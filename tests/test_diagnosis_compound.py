@@ -130,3 +130,21 @@ def _section_named_at_the_noise(seed, merged):
     assert f"section {merged[0]} " in d.best.structure, d.best.structure
     assert d.drift == [], d.drift
     assert d.best.cost <= 1.25 * d.noise["cost"]
+
+
+@pytest.mark.slow
+def test_skin_effect_beside_a_strong_magnetising_change_is_not_named():
+    """Skin effect (square-root form, 36 kHz) and a magnetising change (Cole-Cole, L down to 54 % above 72 kHz).
+    The reference solver's own fit, the truth's sections with the magnetising change as the truth has it and every
+    value free within twice the tolerance, reaches the truth to far below the noise: the skin effect cannot be told
+    apart beside the magnetising change's loss, and the diagnosis names the magnetising change alone."""
+    import numpy as np
+
+    from detectability import best_baseline_fit
+
+    case, d = _diagnose(("skin-effect", "magnetising-inductance"), 701)
+    beside = best_baseline_fit(case, target="truth", structure="sections", keep="magnetising-inductance",
+                               bound=2 * float(np.log(1.2)))
+    assert not beside["detectable"] and beside["cost"] < 0.01 * beside["noise"], beside
+    assert d.causes == ["magnetising-inductance"], d.steps
+    assert d.drift == [], d.drift
