@@ -678,9 +678,13 @@ def _converged(ctx: _Context, r: FitResult) -> FitResult:
     1.54e-5; the core loss alone refitted, 1.55e-5). Refitting the named model
     first leaves a further cause only what the model cannot reach. Six-response
     models are left as they are: each of their evaluations costs several
-    times more.
+    times more. So is a model with a new section: whether it is at the noise
+    with values off the design turns on its residuals' whiteness
+    (:meth:`_Context.settled`), and refitted further a split that had taken a
+    skin effect's share into its values passed that test and stopped there
+    (design missing section + skin effect 702).
     """
-    if not ctx.one_port:
+    if not ctx.one_port or r.structure:
         return r
     try:
         fit = ctx.fit(r.fitted_circuit(), r.effects, couplings=r.couplings)
