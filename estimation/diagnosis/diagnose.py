@@ -77,6 +77,7 @@ from .evidence import (band_table, localise, noise_floor, noise_variance, noise_
 from .fit import (CANDIDATE_FAILURES, WIDE_CONTINUATION, WIDER_CONTINUATION, DiagnosisError, FitResult, FrequencyFit,
                   configuration_ports, current_nc, group_names, significant)
 from .drift import GROSS_DRIFT, located_drift, relaxed_drift
+from .converge import converged
 from .holdout import held_out_gain
 from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from .forms import rechoose_forms
@@ -625,7 +626,7 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
                       "model": best.structure + ("; " if best.structure and best.effects else "")
                       + ", ".join(e.label for e in best.effects)})
         chosen.append(new_cause)
-        current = _converged(ctx, best)
+        current = converged(ctx, best, lambda m: _log(m, progress))
         _log(f"step {len(chosen)}: {new_cause} (gain {steps[-1]['gain']:.3f}, dBIC {steps[-1]['delta_bic']:.1f})",
              progress)
         remaining = [c for c in pool if c not in chosen and "+" not in c]
@@ -660,46 +661,6 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
 #: Evaluations of each refit of the held-out check (:mod:`.holdout`): converged, so the check does not depend on
 #: where a short refit stopped.
 HOLDOUT_NFEV = 100
-
-
-#: Evaluations of the refit, from its own values, of each model the selection names (one port, :func:`_converged`).
-CONVERGE_NFEV = 300
-
-
-def _converged(ctx: _Context, r: FitResult) -> FitResult:
-    """``r`` refitted from its own values to convergence (one-port data; else ``r`` as it is).
-
-    A cause's fits stop after tens of evaluations, and under the design prior
-    a model can stop with its values still paying a share of the penalty they
-    would not need. The next cause is then measured against that: refitted
-    with it, the shared values converge too, and any cause shows the same gain
-    (design core loss 704: the core loss stopped at 3.1e-5, half of it
-    penalty; with a skin effect, a magnetising change or a new section alike,
-    1.54e-5; the core loss alone refitted, 1.55e-5). Refitting the named model
-    first leaves a further cause only what the model cannot reach. Six-response
-    models are left as they are: each of their evaluations costs several
-    times more. So is a model with a new section: whether it is at the noise
-    with values off the design turns on its residuals' whiteness
-    (:meth:`_Context.settled`), and refitted further a split that had taken a
-    skin effect's share into its values passed that test and stopped there
-    (design missing section + skin effect 702).
-    """
-    if not ctx.one_port or r.structure:
-        return r
-    try:
-        fit = ctx.fit(r.fitted_circuit(), r.effects, couplings=r.couplings)
-        res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), r.x[current_nc(r):]])[None], grid=False,
-                      max_nfev=CONVERGE_NFEV, tol=1e-10)
-    except _CANDIDATE_FAILURES:
-        return r
-    if res.objective >= r.objective:
-        return r
-    res.structure, res.causes, res.cause = r.structure, list(r.causes), r.cause
-    for name in ("merged_back", "from_design"):
-        if hasattr(r, name):
-            setattr(res, name, getattr(r, name))
-    _log(f"  {r.cause} refitted to convergence: {r.objective:.4g} -> {res.objective:.4g}", ctx.progress)
-    return res
 
 
 def _effect_starts(ctx: _Context, fit: FrequencyFit, effect: Effect) -> list[dict[str, float]] | None:
