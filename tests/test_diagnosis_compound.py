@@ -56,6 +56,7 @@ def test_missing_section_found_when_the_design_stays_far_above_the_noise():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_last_sections_merged_and_a_skin_effect_are_named_together():
     """The design merges the winding's last two sections (the last ends at ground), and a skin effect is hidden.
 

@@ -116,6 +116,7 @@ def test_levels_and_case_keys():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_time_path_at_the_adc_cell_reaches_the_bound_rule():
     """One seed of the time path (PSO + local, RMSE) on the record measured through the chain: every value
     within max(5 %, 3 x its Cramer-Rao bound for that record)."""

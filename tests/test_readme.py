@@ -20,10 +20,14 @@ from readme_commands import README, readme_commands, run_readme_command
 FAST = ("pris-cosim models", "pris-cosim frf ", "pris-cosim simulate ", "pris-cosim build-fmu ")
 #: Commands that another test runs as written, from the same kind of directory, and checks further (not run twice).
 RUN_ELSEWHERE = {"pris-cosim study hv-transformer --quick": "test_hv_transformer.py's quick_study fixture"}
+#: Commands of minutes each (CI leaves them out with the other ``long`` tests).
+LONG = ("pris-cosim study three-section",)
 
 
 def _case(cmd: str):
     marks = [] if cmd.startswith(FAST) else [pytest.mark.slow]
+    if cmd.startswith(LONG):
+        marks.append(pytest.mark.long)
     return pytest.param(cmd, marks=marks, id=cmd.split("&&")[-1].strip()[:60])
 
 
