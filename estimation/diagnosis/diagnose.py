@@ -37,7 +37,8 @@ Steps:
    measured resonance is still missing from the model or when it brings the
    fit to the noise floor (a split of the design with its couplings free:
    only within ``UNMERGE_ABOVE_FLOOR`` times it, whatever the resonances); one refused by the held-out check
-   is tried again after the next cause is named. Selection stops when the cost
+   is tried again after the next cause is named, and a section alone refused
+   as the first cause is fitted together with each effect (pairs). Selection stops when the cost
    reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`; for one-port data also
    ``NOISE_MARGIN`` times the floor estimated from the model's residuals, :meth:`_Context.residual_floor`)
    without values moved far off the design, or, once a section was added,
