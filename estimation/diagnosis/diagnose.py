@@ -60,7 +60,7 @@ from __future__ import annotations
 import itertools
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Container, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -603,7 +603,7 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
                 pool.pop(best.cause if best.cause in pool else new_cause)
                 deferred.add(new_cause)  # tried again once another cause is named: it may hold with it
                 if not chosen and len(new_causes) == 1:  # a section alone that takes an effect's share: with it
-                    pool.update(_section_pairs(ctx, results, baseline))
+                    pool.update(_section_pairs(ctx, results, baseline, have=pool))
                 continue
         for other in new_causes[:-1] if len(new_causes) > 1 else []:  # a pair: the effect named with the section
             steps.append({"cause": other, "joint": True, "gain": 1 - best.objective / current.objective,
@@ -817,18 +817,20 @@ def _split_nominal(ctx: _Context, effects: Sequence[Effect], tail: np.ndarray, p
     return res
 
 
-def _section_pairs(ctx: _Context, results: dict[str, FitResult], baseline: FitResult) -> dict[str, FitResult]:
+def _section_pairs(ctx: _Context, results: dict[str, FitResult], baseline: FitResult,
+                   have: Container[str] = ()) -> dict[str, FitResult]:
     """A missing section fitted together with each continuous effect's single fit, by the pair's cause name.
 
     Sought when no single cause is enough, and when a section alone, the
     best first cause, is refused by the held-out check: fitted alone, its
     values take a share of an effect that is there too and fail on the
     points left out (design missing section + skin effect 703: the split
-    alone gained 0.54, held out -0.08; with the skin effect, 0.83).
+    alone gained 0.54, held out -0.08; with the skin effect, 0.83). Pairs
+    already in ``have`` are not fitted again.
     """
     pairs = {}
     for cause, single in results.items():
-        if cause in STRUCTURAL or "+" in cause or not single.effects:
+        if cause in STRUCTURAL or not single.effects or f"{cause}+missing-section" in have:
             continue
         t = time.perf_counter()
         try:
