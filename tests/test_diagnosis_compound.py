@@ -72,6 +72,7 @@ def test_last_sections_merged_and_a_skin_effect_are_named_together():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_missing_section_in_the_middle_of_a_design_all_off_by_ten_percent():
     """Sections 3 and 4 of seven merged; every split seed starts hundreds of times above the noise, and only the
     search through every seed of every split (two smoothing schedules) brings one to it."""
@@ -134,6 +135,7 @@ def _section_named_at_the_noise(seed, merged):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_skin_effect_beside_a_strong_magnetising_change_is_not_named():
     """Skin effect (square-root form, 36 kHz) and a magnetising change (Cole-Cole, L down to 54 % above 72 kHz).
     The reference solver's own fit, the truth's sections with the magnetising change as the truth has it and every

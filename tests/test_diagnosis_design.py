@@ -48,6 +48,7 @@ def test_within_tolerance_gives_no_cause_and_no_drift():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_doubled_capacitance_is_drift_not_a_cause():
     d = _diagnose("c3_doubled")
     _check(d, "c3_doubled")
@@ -110,6 +111,7 @@ def test_cli_reads_tolerance_and_values_with_suffixes(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_skin_effect_named_beside_a_doubled_capacitance():
     """An independent generator's design case: C6 at twice its design value plus a skin effect.
 

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from estimation.diagnosis import diagnose_frequency
-from estimation.diagnosis.catalogue import MagnetisingInductance, SkinEffect, effect_variants, winding_groups
+from estimation.diagnosis.catalogue import (CoreLoss, MagnetisingInductance, SkinEffect, effect_variants,
+                                            winding_groups)
 from pris_cosim.frf import Response, ResponseModel
 from pris_cosim.models import get_model
 from pris_cosim.netlist import parse_netlist
@@ -48,6 +49,7 @@ def test_effect_absorbed_by_the_fitted_baseline_is_found_from_the_design_values(
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_split_that_reaches_the_noise_is_named_without_a_missing_resonance():
     """A 7-section truth merged to 6: every measured resonance is in the baseline, the split alone reaches the noise."""
     case = one_port_case("missing-section", 2)
@@ -87,6 +89,50 @@ def test_magnetising_relaxation_form_is_realised_by_a_passive_ladder():
     f = np.logspace(3, 7, 60)
     _, _, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n", p, 1e3, 1e7, f)
     _assert_within(z, 2.0 + 2j * np.pi * f * 10e-3 * (1 - p["d"] + p["d"] * (1 + (1j * f / p["fc"]) ** p["a"]) ** (-p["b"])))
+
+
+def test_core_loss_relaxation_form_is_realised_by_a_passive_ladder():
+    """The core loop ``Lc || Z_c(f)`` realised against ``Z_c = a [1 - (1 + (j f/b)^alpha)^(-beta)]`` written out here;
+    ``alpha = beta = 1`` is the one-pole causal form, ``a j f/b / (1 + j f/b)``."""
+    eff = CoreLoss(form="relaxation", f_ref=1e2, f_max=1e7)
+    assert [q.name for q in eff.parameters] == ["a", "b", "alpha", "beta"]
+    f = np.logspace(2, 7, 60)
+    one = {k: np.array([v]) for k, v in {"a": 5e3, "b": 2e4, "alpha": 1.0, "beta": 1.0}.items()}
+    x = 1j * f / 2e4
+    np.testing.assert_allclose(eff.resistance(f, one)[0], 5e3 * x / (1 + x), rtol=1e-12)
+    p = {"a": 5e3, "b": 2e4, "alpha": 0.9, "beta": 0.5}
+    _, note, z = _realised(eff, "* core loop and one section\nR1 n1 x 2.0\nL1 x 0 100u\nLc n1 0 20m\nRc n1 0 5k\n",
+                           p, 1e2, 1e7, f)
+    assert "passive" in note
+    zc = p["a"] * (1 - (1 + (1j * f / p["b"]) ** p["alpha"]) ** (-p["beta"]))
+    core = 1 / (1 / (2j * np.pi * f * 20e-3) + 1 / zc)
+    _assert_within(z, 1 / (1 / core + 1 / (2.0 + 2j * np.pi * f * 100e-6)))
+
+
+def test_core_loss_relaxation_follows_a_lamination_where_one_pole_cannot():
+    """A lamination's eddy-current impedance ``R q tanh q / (1 + q tanh q)``, ``q = sqrt(j f/f_b)`` (the classical
+    diffusion into a sheet), fitted over four decades: the distributed form within 3 % RMS (log error), less than half
+    the error of one relaxation time (6 % RMS, 13 % at worst)."""
+    from scipy.optimize import least_squares
+
+    f = np.logspace(2, 6, 80)
+    q = np.sqrt(1j * f / 3e3)
+    want = 1e4 * q * np.tanh(q) / (1 + q * np.tanh(q))
+    worst = {}
+    for form in ("causal", "relaxation"):
+        eff = CoreLoss(form=form, f_ref=1e2, f_max=1e6)
+
+        def err(v, eff=eff):
+            p = {q_.name: np.array([np.exp(x) if q_.log else x]) for q_, x in zip(eff.parameters, v)}
+            e = np.log(eff.resistance(f, p)[0] / want)
+            return np.concatenate([e.real, e.imag])
+        x0 = [np.log(1e4), np.log(3e3)] + [1.0, 0.5][:len(eff.parameters) - 2]
+        lo = [np.log(q_.lower) if q_.log else q_.lower for q_ in eff.parameters]
+        hi = [np.log(q_.upper) if q_.log else q_.upper for q_ in eff.parameters]
+        r = least_squares(err, np.clip(x0, lo, hi), bounds=(lo, hi))
+        worst[form] = (float(np.sqrt(np.mean(r.fun ** 2))), float(np.max(np.abs(r.fun))))
+    (rms, top), (rms1, top1) = worst["relaxation"], worst["causal"]
+    assert rms < 0.03 and rms < 0.5 * rms1 and top < 0.5 * top1, worst
 
 
 def test_skin_causal_form_with_a_level_is_realised_by_a_passive_ladder():

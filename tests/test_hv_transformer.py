@@ -157,6 +157,7 @@ def quick_study(tmp_path_factory):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_quick_study_rows(quick_study):
     out, d = quick_study
     rows = {r["case"]: r for r in d["rows"]}
@@ -176,6 +177,7 @@ def test_quick_study_rows(quick_study):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_quick_study_resumes_without_rerunning(quick_study, capsys):
     out, d = quick_study
     assert main(["study", "hv-transformer", "--quick", "--json", "--out", str(out)]) == 0

@@ -45,15 +45,47 @@ def _diagnose_one(args: tuple) -> dict:
     return diagnose_sweep(fingerprint, reference, load_sweep(path), progress=False)
 
 
-@pytest.fixture(scope="module")
-def diagnoses(reference, fingerprint):
-    """The 16 shorts diagnosed against the one fitted reference, two at a time."""
+def _diagnosed(reference, fingerprint, positions) -> dict:
+    """The shorts at ``positions`` of both kinds diagnosed against the one fitted reference, two at a time."""
     from concurrent.futures import ProcessPoolExecutor
 
-    keys = [(kind, nn) for kind in KINDS for nn in TAPS]
+    keys = [(kind, nn) for kind in KINDS for nn in positions]
     jobs = [(fingerprint, reference, DATA / KINDS[kind].format(nn)) for kind, nn in keys]
     with ProcessPoolExecutor(max_workers=2) as pool:
         return dict(zip(keys, pool.map(_diagnose_one, jobs)))
+
+
+@pytest.fixture(scope="module")
+def diagnoses(reference, fingerprint):
+    """The 16 shorts (``long`` tests: minutes)."""
+    return _diagnosed(reference, fingerprint, TAPS)
+
+
+#: Two positions far apart along the winding (taps 27 and 75), for the tests CI runs.
+PAIR = (5, 13)
+
+
+@pytest.fixture(scope="module")
+def pair_diagnoses(reference, fingerprint):
+    """The shorts at the two positions of ``PAIR``, both kinds."""
+    return _diagnosed(reference, fingerprint, PAIR)
+
+
+@pytest.mark.slow
+def test_two_shorts_of_each_kind_are_named_located_apart_and_ordered(pair_diagnoses):
+    """Both kinds at taps 27 and 75: shorted turns, the later tap placed at least two sections further along,
+    the two kinds within two sections of each other, and the 10-Ohm short more resistive than the bolted one."""
+    for kind in KINDS:
+        first, second = (pair_diagnoses[kind, nn] for nn in PAIR)
+        assert first.cause == second.cause == "shorted-turns", (kind, first.cause, second.cause)
+        a, b = first.location(), second.location()
+        assert b["fraction"] - a["fraction"] >= 2.0 / a["of_sections"], (kind, a, b)
+    for nn in PAIR:
+        a, b = pair_diagnoses["bolted", nn].location(), pair_diagnoses["resistive", nn].location()
+        assert abs(a["fraction"] - b["fraction"]) <= 2.0 / a["of_sections"], (nn, a, b)
+        rb = pair_diagnoses["bolted", nn].severity()["fault_resistance_ohm"]
+        rr = pair_diagnoses["resistive", nn].severity()["fault_resistance_ohm"]
+        assert rr > rb, nn
 
 
 # ---------------------------------------------------------------------------
@@ -75,6 +107,7 @@ def test_fingerprint_fits_the_reference(reference, fingerprint):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.parametrize("kind", list(KINDS))
 def test_every_short_is_named_shorted_turns(diagnoses, kind):
     for nn in TAPS:
@@ -85,6 +118,7 @@ def test_every_short_is_named_shorted_turns(diagnoses, kind):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.parametrize("kind", list(KINDS))
 def test_located_positions_follow_the_taps(diagnoses, kind):
     taps = [TAPS[nn] for nn in TAPS]
@@ -95,6 +129,7 @@ def test_located_positions_follow_the_taps(diagnoses, kind):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_locations_agree_between_kinds(diagnoses):
     """A bolted short and a 10-Ohm short at the same taps are placed within two sections of each other."""
     for nn in TAPS:
@@ -103,6 +138,7 @@ def test_locations_agree_between_kinds(diagnoses):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_bolted_and_resistive_shorts_differ_in_resistance(diagnoses):
     for nn in TAPS:
         rb = diagnoses["bolted", nn].severity()["fault_resistance_ohm"]

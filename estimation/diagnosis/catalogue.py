@@ -39,7 +39,12 @@ measured short-circuit impedance it displaced the skin effect).
     power law; ``a = 1, b = 1/2`` is close to a round wire's Bessel impedance.
 ``core-loss``
     thesis (2.4): ``R_c(f) = a f / (f + b)``; causal: ``a (j f/b) / (1 + j f/b)``
-    (``a`` in parallel with ``a / (2 pi b)`` H). A circuit without a core-loss
+    (``a`` in parallel with ``a / (2 pi b)`` H: one relaxation time);
+    relaxation (Havriliak-Negami): ``a [1 - (1 + (j f/b)^alpha)^(-beta)]``, a
+    distribution of relaxation times, the causal form for
+    ``alpha = beta = 1``. Eddy currents in a lamination diffuse into the sheet,
+    and its impedance approaches ``a`` as ``1/sqrt(f)``: ``beta`` near ``1/2``,
+    which one relaxation time cannot follow. A circuit without a core-loss
     resistor (one in parallel with an inductor) gets one at the port.
 ``magnetising-inductance``
     thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = k f_ref^b``, so
@@ -355,6 +360,11 @@ class CoreLoss(Effect):
             ExtraParameter("a", 1e-3, 1e12, (1e6,), description="a_Ro: high-frequency core-loss resistance, Ohm"),
             ExtraParameter("b", 1e-3, 1e12, (1e3,), description="b_Ro: corner frequency, Hz"),
         ]
+        if self.form == "relaxation":  # Havriliak-Negami: a distributed (eddy-current, diffusive) dispersion
+            self.parameters += [
+                ExtraParameter("alpha", 0.3, 1.0, (1.0,), log=False, description="width exponent"),
+                ExtraParameter("beta", 0.2, 1.0, (0.5,), log=False, description="asymmetry exponent"),
+            ]
 
     def resistor(self, circuit: Circuit, groups: Groups) -> str:
         return core_loss_resistor(circuit) or "Rcore"
@@ -381,13 +391,18 @@ class CoreLoss(Effect):
         base = float(values[rc.lower()]) if rc and rc != "Rcore" else 30 * scale
         fmid = float(np.sqrt(fmin * fmax))
         starts = [{"a": base * m, "b": fmid * g} for m in (1.0, 10.0) for g in (0.01, 0.1, 1.0, 10.0)]
-        return starts + [{"a": 1e11, "b": fmid}]  # effectively no core loss: never worse than the baseline
+        starts += [{"a": 1e11, "b": fmid}]  # effectively no core loss: never worse than the baseline
+        if self.form == "relaxation":  # from the diffusive shape (a lamination's is close to beta = 1/2)
+            starts = [{**s, "alpha": 1.0, "beta": 0.5} for s in starts]
+        return starts
 
     def resistance(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
         """``R_c(f)`` (P, F), complex for the causal form."""
         if self.form == "thesis":
             return core_loss_resistance(f[None, :], _p(p, "a"), _p(p, "b")).astype(complex)
         x = 1j * f[None, :] / _p(p, "b")
+        if self.form == "relaxation":
+            return _p(p, "a") * (1 - (1 + x ** _p(p, "alpha")) ** (-_p(p, "beta")))
         return _p(p, "a") * x / (1 + x)
 
     def branch_changes(self, circuit, groups, values, f, p):
@@ -398,6 +413,9 @@ class CoreLoss(Effect):
     def formula(self, p):
         if self.form == "thesis":
             return f"R_c(f) = a f / (f + b) (thesis 2.4), a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz"
+        if self.form == "relaxation":
+            return (f"Z_c(f) = a [1 - (1 + (j f/b)^alpha)^(-beta)] (Havriliak-Negami), a = {p['a']:.4g} Ohm, "
+                    f"b = {p['b']:.4g} Hz, alpha = {p['alpha']:.4g}, beta = {p['beta']:.4g}")
         return f"Z_c(f) = a (j f/b) / (1 + j f/b), a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz"
 
     def realise(self, circuit, groups, p, fmin, fmax):
@@ -406,6 +424,10 @@ class CoreLoss(Effect):
             lad = fit_resistance(lambda x: core_loss_resistance(x, p["a"], p["b"]), fmin, fmax, 10)
             note = ("a real-valued R_c(f) has no causal realisation: the ladder follows its resistance and adds its "
                     "own reactance")
+        elif self.form == "relaxation":
+            pp = {k: np.array([v]) for k, v in p.items()}
+            lad = fit_impedance(lambda x: self.resistance(np.atleast_1d(x), pp)[0], fmin, fmax, 12)
+            note = "Z_c(f) realised by a passive R-L ladder (parallel R-L sections in series) over the band"
         else:
             lad = FosterRL(0.0, 0.0, np.array([p["a"]]), np.array([p["a"] / (2 * np.pi * p["b"])]))
             note = "R_c(f) realised exactly by a in parallel with a / (2 pi b)"
@@ -623,7 +645,7 @@ def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, 
             if "core" in groups.inductors and (form == "thesis" or (form == "causal" and level)):
                 out.append(MagnetisingInductance(form=form, group="core", f_ref=f_ref, f_max=f_max,
                                                  level=level))
-        elif cause == "core-loss" and form != "relaxation":
+        elif cause == "core-loss":
             out.append(CoreLoss(form=form, group="all", f_ref=f_ref, f_max=f_max))
     if one_port and cause == "stray-capacitance":
         w = 2 * np.pi * f_max

@@ -479,8 +479,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             alt_failed: list[dict[str, Any]] = []
             alt = _select(ctx, baseline, alt_pool, results, variants_tried, alt_failed, **opts)
             # kept when it is better both ways: a lower BIC and a data cost no higher (under the prior, a model
-            # that fits the data worse can win the BIC on the penalty of the values a section moved)
-            if alt[1] and alt[0].bic < current.bic and alt[0].cost <= current.cost:
+            # that fits the data worse can win the BIC on the penalty of the values a section moved), or a lower
+            # BIC at the noise floor (both fit to the noise: what the section adds to the fit is noise)
+            if alt[1] and alt[0].bic < current.bic and (alt[0].cost <= current.cost or ctx.settled(alt[0])):
                 _log(f"{', '.join(alt[1])} without the section: BIC lower by {current.bic - alt[0].bic:.1f} "
                      f"than {', '.join(chosen)}, cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against "
                      f"{current.cost:.4g} + {current.penalty:.4g}: kept", progress)

@@ -117,6 +117,7 @@ def _grid(v: Effect, named: Effect, named_x: Sequence[float]) -> list[np.ndarray
         lo = np.array([np.log(p.lower) if p.log else p.lower for p in v.parameters])
         hi = np.array([np.log(p.upper) if p.log else p.upper for p in v.parameters])
         grid.insert(0, np.clip(np.asarray(named_x, float), lo, hi))
-    elif v.cause == "core-loss":  # thesis and causal share a and b
-        grid.insert(0, np.asarray(named_x, float))
+    elif v.cause == "core-loss":  # every form shares a and b; the relaxation from one relaxation time
+        ab = np.asarray(named_x, float)[:2]
+        grid.insert(0, np.concatenate([ab, [1.0, 1.0]]) if v.form == "relaxation" else ab)
     return grid
