@@ -96,6 +96,7 @@ def test_core_loss_relaxation_form_is_realised_by_a_passive_ladder():
     ``alpha = beta = 1`` is the one-pole causal form, ``a j f/b / (1 + j f/b)``."""
     eff = CoreLoss(form="relaxation", f_ref=1e2, f_max=1e7)
     assert [q.name for q in eff.parameters] == ["a", "b", "alpha", "beta"]
+    assert CoreLoss(form="causal").nested_in(eff) and not eff.nested_in(CoreLoss(form="causal"))
     f = np.logspace(2, 7, 60)
     one = {k: np.array([v]) for k, v in {"a": 5e3, "b": 2e4, "alpha": 1.0, "beta": 1.0}.items()}
     x = 1j * f / 2e4

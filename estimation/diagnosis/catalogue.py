@@ -235,6 +235,11 @@ class Effect:
     def applies(self, circuit: Circuit, groups: Groups) -> bool:
         return bool(self.branches(circuit, groups))
 
+    def nested_in(self, other: "Effect") -> bool:
+        """This variant is a special case of ``other`` (same cause and group, ``other``'s form with some of its
+        parameters fixed); default never."""
+        return False
+
     def formula(self, p: Mapping[str, float]) -> str:
         return ""
 
@@ -368,6 +373,11 @@ class CoreLoss(Effect):
 
     def resistor(self, circuit: Circuit, groups: Groups) -> str:
         return core_loss_resistor(circuit) or "Rcore"
+
+    def nested_in(self, other: Effect) -> bool:
+        """The causal form (one relaxation time) is the relaxation form with ``alpha = beta = 1``."""
+        return (isinstance(other, CoreLoss) and self.form == "causal" and other.form == "relaxation"
+                and self.group == other.group)
 
     def prepare(self, circuit, groups, scale):
         if core_loss_resistor(circuit) is not None or circuit.has_element("Rcore"):

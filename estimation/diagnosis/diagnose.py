@@ -693,7 +693,10 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
             screened.append((pre.cost, eff, fit, pre))
         screened.sort(key=lambda t: t[0])
         pools.append(screened)
-        for i, (cost, eff, fit, pre) in enumerate(screened[:top if len(pools) == 1 else 1]):
+        # a form that is a special case of another screened form (one relaxation time of a distribution) is not
+        # refined: the wider form's fit covers it, and it would take the place of another form
+        refine = [t for t in screened if not any(t[1].nested_in(u[1]) for u in screened)]
+        for i, (cost, eff, fit, pre) in enumerate(refine[:top if len(pools) == 1 else 1]):
             if i and best is not None and best.objective < must_beat and cost > 2 * screened[0][0]:
                 break  # a clearly worse variant is not refined
             try:
