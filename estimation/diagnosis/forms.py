@@ -7,7 +7,9 @@ while the second was missing). Each named cause is tried in every other
 form and group of the catalogue, with the other causes' parameters and the
 circuit values kept (a screening fit of the effects' parameters only); the
 best variant is then fitted in full and replaces the named one only if the
-BIC improves.
+BIC improves. A special case of the named form (one relaxation time of a
+distribution) is not tried: it screens as well as the named form and would
+keep every other form from its full fit.
 """
 
 from __future__ import annotations
@@ -62,7 +64,8 @@ def rechoose_forms(ctx: Any, current: FitResult, min_delta_bic: float, failures:
         circuit = current.fitted_circuit()
         groups = winding_groups(circuit, configuration_ports(ctx.configs), group_names(ctx.configs))
         variants = [v for v in effect_variants(eff.cause, groups, circuit, float(f[0]), ctx.one_port, ctx.scale,
-                                               float(f[-1]), level=ctx.prior is not None) if v.label != eff.label]
+                                               float(f[-1]), level=ctx.prior is not None)
+                    if v.label != eff.label and not v.nested_in(eff)]  # a special case screens as well as the named
         nc = _nc(current)
         offsets = np.cumsum([0] + [len(e.parameters) for e in current.effects])
         tails = [list(current.x[nc + offsets[i]: nc + offsets[i + 1]]) for i in range(len(current.effects))]
