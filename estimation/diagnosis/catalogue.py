@@ -45,7 +45,10 @@ measured short-circuit impedance it displaced the skin effect).
     ``alpha = beta = 1``. Eddy currents in a lamination diffuse into the sheet,
     and its impedance approaches ``a`` as ``1/sqrt(f)``: ``beta`` near ``1/2``,
     which one relaxation time cannot follow. A circuit without a core-loss
-    resistor (one in parallel with an inductor) gets one at the port.
+    resistor (one in parallel with an inductor) gets one at the port, in the
+    thesis's and the one-pole forms only (the distributed form is a core's:
+    at the port of a short-circuit measurement it took the winding's skin
+    effect).
 ``magnetising-inductance``
     thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = k f_ref^b``, so
     ``L(f_ref) = k L_linear``; ``k = 1`` unless the level is free); causal:
@@ -655,7 +658,9 @@ def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, 
             if "core" in groups.inductors and (form == "thesis" or (form == "causal" and level)):
                 out.append(MagnetisingInductance(form=form, group="core", f_ref=f_ref, f_max=f_max,
                                                  level=level))
-        elif cause == "core-loss":
+        # the distributed form is a magnetic core's (its loop Lc || Rc); a resistor added at the port of a circuit
+        # without one is a shunt loss, in the thesis's form and with one relaxation time only
+        elif cause == "core-loss" and (form != "relaxation" or groups.core_resistor is not None):
             out.append(CoreLoss(form=form, group="all", f_ref=f_ref, f_max=f_max))
     if one_port and cause == "stray-capacitance":
         w = 2 * np.pi * f_max
