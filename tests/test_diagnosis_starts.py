@@ -92,20 +92,20 @@ def test_magnetising_relaxation_form_is_realised_by_a_passive_ladder():
 
 
 def test_core_loss_relaxation_form_is_realised_by_a_passive_ladder():
-    """The core loop ``Lc || Z_c(f)`` realised against ``Z_c = a [1 - (1 + (j f/b)^alpha)^(-beta)]`` written out here;
-    ``alpha = beta = 1`` is the one-pole causal form, ``a j f/b / (1 + j f/b)``."""
+    """The core loop ``Lc || Z_c(f)`` realised against ``Z_c = a [1 - (1 + j f/b)^(-beta)]`` written out here;
+    ``beta = 1`` is the one-pole causal form, ``a j f/b / (1 + j f/b)``."""
     eff = CoreLoss(form="relaxation", f_ref=1e2, f_max=1e7)
-    assert [q.name for q in eff.parameters] == ["a", "b", "alpha", "beta"]
+    assert [q.name for q in eff.parameters] == ["a", "b", "beta"]
     assert CoreLoss(form="causal").nested_in(eff) and not eff.nested_in(CoreLoss(form="causal"))
     f = np.logspace(2, 7, 60)
-    one = {k: np.array([v]) for k, v in {"a": 5e3, "b": 2e4, "alpha": 1.0, "beta": 1.0}.items()}
+    one = {k: np.array([v]) for k, v in {"a": 5e3, "b": 2e4, "beta": 1.0}.items()}
     x = 1j * f / 2e4
     np.testing.assert_allclose(eff.resistance(f, one)[0], 5e3 * x / (1 + x), rtol=1e-12)
-    p = {"a": 5e3, "b": 2e4, "alpha": 0.9, "beta": 0.5}
+    p = {"a": 5e3, "b": 2e4, "beta": 0.5}
     _, note, z = _realised(eff, "* core loop and one section\nR1 n1 x 2.0\nL1 x 0 100u\nLc n1 0 20m\nRc n1 0 5k\n",
                            p, 1e2, 1e7, f)
     assert "passive" in note
-    zc = p["a"] * (1 - (1 + (1j * f / p["b"]) ** p["alpha"]) ** (-p["beta"]))
+    zc = p["a"] * (1 - (1 + 1j * f / p["b"]) ** (-p["beta"]))
     core = 1 / (1 / (2j * np.pi * f * 20e-3) + 1 / zc)
     _assert_within(z, 1 / (1 / core + 1 / (2.0 + 2j * np.pi * f * 100e-6)))
 
@@ -127,7 +127,7 @@ def test_core_loss_relaxation_follows_a_lamination_where_one_pole_cannot():
             p = {q_.name: np.array([np.exp(x) if q_.log else x]) for q_, x in zip(eff.parameters, v)}
             e = np.log(eff.resistance(f, p)[0] / want)
             return np.concatenate([e.real, e.imag])
-        x0 = [np.log(1e4), np.log(3e3)] + [1.0, 0.5][:len(eff.parameters) - 2]
+        x0 = [np.log(1e4), np.log(3e3)] + [0.5][:len(eff.parameters) - 2]
         lo = [np.log(q_.lower) if q_.log else q_.lower for q_ in eff.parameters]
         hi = [np.log(q_.upper) if q_.log else q_.upper for q_ in eff.parameters]
         r = least_squares(err, np.clip(x0, lo, hi), bounds=(lo, hi))

@@ -40,11 +40,14 @@ measured short-circuit impedance it displaced the skin effect).
 ``core-loss``
     thesis (2.4): ``R_c(f) = a f / (f + b)``; causal: ``a (j f/b) / (1 + j f/b)``
     (``a`` in parallel with ``a / (2 pi b)`` H: one relaxation time);
-    relaxation (Havriliak-Negami): ``a [1 - (1 + (j f/b)^alpha)^(-beta)]``, a
-    distribution of relaxation times, the causal form for
-    ``alpha = beta = 1``. Eddy currents in a lamination diffuse into the sheet,
-    and its impedance approaches ``a`` as ``1/sqrt(f)``: ``beta`` near ``1/2``,
-    which one relaxation time cannot follow. A circuit without a core-loss
+    relaxation (Davidson-Cole): ``a [1 - (1 + j f/b)^(-beta)]``, a
+    distribution of relaxation times, the causal form for ``beta = 1``; like
+    it, inductive at low frequency. Eddy currents in a lamination diffuse into
+    the sheet, and its impedance approaches ``a`` as ``1/sqrt(f)``: ``beta``
+    near ``1/2``, which one relaxation time cannot follow. (A width exponent,
+    Havriliak-Negami, would give the low-frequency side a constant phase,
+    the magnetising forms' share: on the virtual lab's chain it took the
+    magnetising change.) A circuit without a core-loss
     resistor (one in parallel with an inductor) gets one at the port, in the
     thesis's and the one-pole forms only (the distributed form is a core's:
     at the port of a short-circuit measurement it took the winding's skin
@@ -368,17 +371,15 @@ class CoreLoss(Effect):
             ExtraParameter("a", 1e-3, 1e12, (1e6,), description="a_Ro: high-frequency core-loss resistance, Ohm"),
             ExtraParameter("b", 1e-3, 1e12, (1e3,), description="b_Ro: corner frequency, Hz"),
         ]
-        if self.form == "relaxation":  # Havriliak-Negami: a distributed (eddy-current, diffusive) dispersion
-            self.parameters += [
-                ExtraParameter("alpha", 0.3, 1.0, (1.0,), log=False, description="width exponent"),
-                ExtraParameter("beta", 0.2, 1.0, (0.5,), log=False, description="asymmetry exponent"),
-            ]
+        if self.form == "relaxation":  # Davidson-Cole: a distributed (eddy-current, diffusive) dispersion
+            self.parameters.append(ExtraParameter("beta", 0.2, 1.0, (0.5,), log=False,
+                                                  description="exponent of the approach to a"))
 
     def resistor(self, circuit: Circuit, groups: Groups) -> str:
         return core_loss_resistor(circuit) or "Rcore"
 
     def nested_in(self, other: Effect) -> bool:
-        """The causal form (one relaxation time) is the relaxation form with ``alpha = beta = 1``."""
+        """The causal form (one relaxation time) is the relaxation form with ``beta = 1``."""
         return (isinstance(other, CoreLoss) and self.form == "causal" and other.form == "relaxation"
                 and self.group == other.group)
 
@@ -406,7 +407,7 @@ class CoreLoss(Effect):
         starts = [{"a": base * m, "b": fmid * g} for m in (1.0, 10.0) for g in (0.01, 0.1, 1.0, 10.0)]
         starts += [{"a": 1e11, "b": fmid}]  # effectively no core loss: never worse than the baseline
         if self.form == "relaxation":  # from the diffusive shape (a lamination's is close to beta = 1/2)
-            starts = [{**s, "alpha": 1.0, "beta": 0.5} for s in starts]
+            starts = [{**s, "beta": 0.5} for s in starts]
         return starts
 
     def resistance(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -415,7 +416,7 @@ class CoreLoss(Effect):
             return core_loss_resistance(f[None, :], _p(p, "a"), _p(p, "b")).astype(complex)
         x = 1j * f[None, :] / _p(p, "b")
         if self.form == "relaxation":
-            return _p(p, "a") * (1 - (1 + x ** _p(p, "alpha")) ** (-_p(p, "beta")))
+            return _p(p, "a") * (1 - (1 + x) ** (-_p(p, "beta")))
         return _p(p, "a") * x / (1 + x)
 
     def branch_changes(self, circuit, groups, values, f, p):
@@ -427,8 +428,8 @@ class CoreLoss(Effect):
         if self.form == "thesis":
             return f"R_c(f) = a f / (f + b) (thesis 2.4), a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz"
         if self.form == "relaxation":
-            return (f"Z_c(f) = a [1 - (1 + (j f/b)^alpha)^(-beta)] (Havriliak-Negami), a = {p['a']:.4g} Ohm, "
-                    f"b = {p['b']:.4g} Hz, alpha = {p['alpha']:.4g}, beta = {p['beta']:.4g}")
+            return (f"Z_c(f) = a [1 - (1 + j f/b)^(-beta)] (Davidson-Cole), a = {p['a']:.4g} Ohm, "
+                    f"b = {p['b']:.4g} Hz, beta = {p['beta']:.4g}")
         return f"Z_c(f) = a (j f/b) / (1 + j f/b), a = {p['a']:.4g} Ohm, b = {p['b']:.4g} Hz"
 
     def realise(self, circuit, groups, p, fmin, fmax):

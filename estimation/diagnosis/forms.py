@@ -122,5 +122,5 @@ def _grid(v: Effect, named: Effect, named_x: Sequence[float]) -> list[np.ndarray
         grid.insert(0, np.clip(np.asarray(named_x, float), lo, hi))
     elif v.cause == "core-loss":  # every form shares a and b; the relaxation from one relaxation time
         ab = np.asarray(named_x, float)[:2]
-        grid.insert(0, np.concatenate([ab, [1.0, 1.0]]) if v.form == "relaxation" else ab)
+        grid.insert(0, np.concatenate([ab, [1.0]]) if v.form == "relaxation" else ab)
     return grid
