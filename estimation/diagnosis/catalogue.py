@@ -3,10 +3,11 @@
 Every cause comes in the thesis's form, exactly as printed (real-valued
 element values, :mod:`pris_cosim.freqdep`), and in causal forms (complex
 impedances that a passive network can realise): a constant-phase (power-law)
-form, and for the skin effect a relaxation form with a corner frequency
+form, and relaxation forms: for the skin effect one with a corner frequency
 below which the resistance keeps its low-frequency value (a power law holds
 only far above the corner, where the skin depth is below the conductor's
-size). All forms name the same cause; the diagnosis fits them and keeps the
+size), for the magnetising inductance and a core loop's loss a distribution
+of relaxation times. All forms name the same cause; the diagnosis fits them and keeps the
 best. With several windings each cause is tried per winding group (``lv``
 only, ``hv`` only, ``all``).
 
