@@ -9,7 +9,7 @@ from __future__ import annotations
 from importlib import import_module
 from typing import Any
 
-_WHERE = {"Diagnosis": "diagnose", "diagnose_frequency": "diagnose", "DiagnosisError": "fit", "FitResult": "fit",
+_WHERE = {"Diagnosis": "result", "diagnose_frequency": "diagnose", "DiagnosisError": "fit", "FitResult": "fit",
           "FrequencyFit": "fit", "WaveformDiagnosis": "waveform", "diagnose_waveforms": "waveform"}
 
 __all__ = sorted(_WHERE)

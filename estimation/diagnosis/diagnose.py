@@ -83,6 +83,7 @@ from .holdout import held_out_gain
 from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from .forms import rechoose_forms
 from .realise import realise_extended
+from .result import Diagnosis
 from .sections import section_candidates
 from .unmerge import missing_modes, resolved_points, search_unmerged
 
@@ -101,82 +102,6 @@ WIDE_SEED_NFEV = 20
 #: ... and, with every measured resonance already in the model without it, named only if its fit comes within this
 #: factor of ``NOISE_MARGIN`` times the noise floor.
 STRUCTURAL_FLOOR = 2.0
-
-
-@dataclass
-class Diagnosis:
-    """Result of a diagnosis (see :meth:`as_json` for the command-line keys)."""
-
-    cause: str
-    baseline: FitResult
-    best: FitResult | None
-    fits: list[FitResult]
-    frequency_hz: np.ndarray
-    measured: dict[str, np.ndarray]
-    evidence: dict[str, Any] = field(default_factory=dict)
-    realisation: dict[str, Any] = field(default_factory=dict)
-    wall_s: float = 0.0
-    causes: list[str] = field(default_factory=list)
-    steps: list[dict[str, Any]] = field(default_factory=list)
-    noise: dict[str, Any] = field(default_factory=dict)
-    unexplained: list[dict[str, Any]] = field(default_factory=list)
-    failed: list[dict[str, Any]] = field(default_factory=list)
-    drift: list[dict[str, Any]] = field(default_factory=list)
-    baseline_drift: list[dict[str, Any]] = field(default_factory=list)
-    #: Other values off the design that explain the data as well as the one reported (:func:`.drift.located_drift`).
-    drift_alternatives: list[dict[str, Any]] = field(default_factory=list)
-    tolerance: float = float("inf")
-
-    @property
-    def gain(self) -> float:
-        """Fraction of the baseline cost removed by the model with every named cause.
-
-        With a design prior the costs are penalised (:attr:`.fit.FitResult.objective`): a baseline that fits
-        only by moving values far from the design does not count as a fit.
-        """
-        return 0.0 if self.best is None else max(0.0, 1 - self.best.objective / self.baseline.objective)
-
-    def candidates(self) -> list[dict[str, Any]]:
-        rows = []
-        for r in self.fits:
-            rows.append({
-                "cause": r.cause, "cost": r.cost, "gain": max(0.0, 1 - r.objective / self.baseline.objective), "bic": r.bic,
-                "delta_bic": self.baseline.bic - r.bic, "n_params": r.n_params, "extra": r.extra,
-                "form": r.effects[0].form if r.effects else "", "group": r.effects[0].group if r.effects else "",
-                "formula": r.describe()[0]["formula"] if r.effects else r.structure, "wall_s": r.wall_s,
-            })
-        return rows
-
-    def as_json(self) -> dict[str, Any]:
-        ext = self.best
-        return {
-            "cause": self.cause,
-            "causes": list(self.causes),
-            "steps": list(self.steps),
-            "candidates": self.candidates(),
-            "baseline_cost": self.baseline.cost,
-            "extended_cost": ext.cost if ext else self.baseline.cost,
-            "baseline_penalty": self.baseline.penalty,
-            "extended_penalty": ext.penalty if ext else self.baseline.penalty,
-            "gain": self.gain,
-            "tolerance": self.tolerance,
-            "drift": list(self.drift),
-            "baseline_drift": list(self.baseline_drift),
-            "drift_alternatives": list(self.drift_alternatives),
-            "noise_floor": self.noise.get("cost", 0.0),
-            "noise": self.noise,
-            "unexplained": self.unexplained,
-            "failed": self.failed,
-            "baseline_bic": self.baseline.bic,
-            "fitted_extension": ext.describe() if ext else [],
-            "structure": ext.structure if ext else "",
-            "baseline_values": self.baseline.values,
-            "extended_values": ext.values if ext else {},
-            "evidence": self.evidence,
-            "realisation": self.realisation,
-            "wall_s": self.wall_s,
-        }
-
 
 
 def _refuse(pool: dict[str, Any], failed: list[dict[str, Any]], best: Any, cause: str, progress: bool,

@@ -10,7 +10,7 @@ import numpy as np
 from pris_cosim.netlist import write_netlist
 from pris_cosim.plotting import pyplot
 
-from .diagnose import Diagnosis
+from .result import Diagnosis
 
 
 def plot_fits(diag: Diagnosis, path: Path) -> Path:
