@@ -50,7 +50,9 @@ Steps:
    A cause made redundant by those named after it is dropped; while the model
    stays above the noise, each named cause's form and group is then chosen
    again with the others in the model (:mod:`.forms`; a swap only if the BIC
-   improves by ``min_delta_bic``).
+   improves by ``min_delta_bic``). When a form changes, the causes not named
+   are fitted again with the changed model and the selection goes on from
+   it (once).
 4. What is still above the noise after the last step is reported by band
    (:func:`.evidence.unexplained_bands`).
 """
@@ -471,107 +473,128 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
     progress, prior, weights = ctx.progress, ctx.prior, ctx.weights
     configs, f, data, fixed, impedance_scale = ctx.configs, ctx.f, ctx.data, ctx.fixed, ctx.scale
     pool = dict(pool)
+    allowed = [c for c in pool if "+" not in c and c in results]  # the causes this selection may name
     current, chosen, steps, deferred = baseline, [], [], set()
-    while pool and len(chosen) < max_causes:
-        if ctx.settled(current):
-            _log("cost at the noise floor: no further cause", progress)
-            break
-        best = min(pool.values(), key=lambda r: r.bic)
-        need = min_gain if not chosen else min_step_gain
-        # a model that reaches the noise only by moving values far off the design is no explanation: against it, a
-        # candidate that reaches the noise within the design, or with fewer values far off (a value really off the
-        # design stays off in every model), needs the BIC margin but no share of the cost
-        if ctx.distorted(current) and (ctx.explained(best) or (
-                best.objective <= NOISE_MARGIN * ctx.floor and len(ctx.gross(best)) < len(ctx.gross(current)))):
-            need = 0.0
-        if not significant(current.bic, current.objective, best.bic, best.objective, min_delta_bic, need):
-            break
-        new_causes = [c for c in best.causes if c not in chosen]
-        new_cause = new_causes[-1] if any(c in STRUCTURAL for c in new_causes) and len(new_causes) > 1 else \
-            new_causes[0]
-        if new_cause in STRUCTURAL:
-            if getattr(best, "from_design", False) and best.objective > UNMERGE_ABOVE_FLOOR * ctx.floor:
-                _refuse(pool, failed, best, new_cause, progress,
-                        f"a split of the design values that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise",
-                        "a split of the design values with its couplings free, and the fit with it stays far above "
-                        "the noise")
-                continue
-            if not chosen and best.couplings and best.objective > UNMERGE_ABOVE_FLOOR * ctx.floor:
-                _refuse(pool, failed, best, new_cause, progress,
-                        f"a first cause with free couplings that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise",
-                        "a new section with its couplings free named first, and the fit with it stays far above "
-                        "the noise (free couplings take the share of a frequency-dependent effect)")
-                deferred.add(new_cause)  # not first: tried again once another cause is named
-                continue
-            if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * ctx.floor
-                    and not missing_modes(f, data, current.predicted, ctx.resolved)):
-                _refuse(pool, failed, best, new_cause, progress,
-                        "the model without it has every measured resonance and the split does not reach the noise",
-                        "no measured resonance missing from the model without it, and the fit with it stays above "
-                        "the noise")
-                continue
-            # a pair (effect and section fitted together) is held out against the effect alone: the section must
-            # add to it on points it was not fitted to (against the model before, the effect's share passes it)
-            before = current
-            alone = results.get(new_causes[0]) if len(new_causes) == 2 else None
-            if alone is not None and alone.objective < current.objective:
-                before = alone
-            try:
-                held = held_out_gain(before, best, configs, f, data, fixed, impedance_scale, weights=weights,
-                                     max_nfev=HOLDOUT_NFEV, prior=prior, noise=ctx.noise)
-            except _CANDIDATE_FAILURES:
-                held = -np.inf
-            if held < need:
-                _log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
-                     "only)", progress)
-                failed.append({"cause": best.cause, "cost": best.cost,
-                               "reason": f"held-out gain {held:.3f} below {need} (alternate points)"})
-                pool.pop(best.cause if best.cause in pool else new_cause)
-                deferred.add(new_cause)  # tried again once another cause is named: it may hold with it
-                if not chosen and len(new_causes) == 1:  # a section alone that takes an effect's share: with it
-                    pool.update(_section_pairs(ctx, results, baseline, have=pool))
-                continue
-        for other in new_causes[:-1] if len(new_causes) > 1 else []:  # a pair: the effect named with the section
-            steps.append({"cause": other, "joint": True, "gain": 1 - best.objective / current.objective,
+    # forward selection measured each cause against the named ones in the forms they had then; a form chosen
+    # again changes that model (a magnetising change in its causal form left a new section's share unseen, two-winding
+    # magnetising change + missing section 500): the causes not named are measured once more against it
+    for round_ in range(2):
+        while pool and len(chosen) < max_causes:
+            if ctx.settled(current):
+                _log("cost at the noise floor: no further cause", progress)
+                break
+            best = min(pool.values(), key=lambda r: r.bic)
+            need = min_gain if not chosen else min_step_gain
+            # a model that reaches the noise only by moving values far off the design is no explanation: against it, a
+            # candidate that reaches the noise within the design, or with fewer values far off (a value really off the
+            # design stays off in every model), needs the BIC margin but no share of the cost
+            if ctx.distorted(current) and (ctx.explained(best) or (
+                    best.objective <= NOISE_MARGIN * ctx.floor and len(ctx.gross(best)) < len(ctx.gross(current)))):
+                need = 0.0
+            if not significant(current.bic, current.objective, best.bic, best.objective, min_delta_bic, need):
+                break
+            new_causes = [c for c in best.causes if c not in chosen]
+            new_cause = new_causes[-1] if any(c in STRUCTURAL for c in new_causes) and len(new_causes) > 1 else \
+                new_causes[0]
+            if new_cause in STRUCTURAL:
+                if getattr(best, "from_design", False) and best.objective > UNMERGE_ABOVE_FLOOR * ctx.floor:
+                    _refuse(pool, failed, best, new_cause, progress,
+                            f"a split of the design values that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise",
+                            "a split of the design values with its couplings free, and the fit with it stays far above "
+                            "the noise")
+                    continue
+                if not chosen and best.couplings and best.objective > UNMERGE_ABOVE_FLOOR * ctx.floor:
+                    _refuse(pool, failed, best, new_cause, progress,
+                            f"a first cause with free couplings that stays {UNMERGE_ABOVE_FLOOR:g} x above the noise",
+                            "a new section with its couplings free named first, and the fit with it stays far above "
+                            "the noise (free couplings take the share of a frequency-dependent effect)")
+                    deferred.add(new_cause)  # not first: tried again once another cause is named
+                    continue
+                if (getattr(best, "merged_back", None) and best.objective > NOISE_MARGIN * STRUCTURAL_FLOOR * ctx.floor
+                        and not missing_modes(f, data, current.predicted, ctx.resolved)):
+                    _refuse(pool, failed, best, new_cause, progress,
+                            "the model without it has every measured resonance and the split does not reach the noise",
+                            "no measured resonance missing from the model without it, and the fit with it stays above "
+                            "the noise")
+                    continue
+                # a pair (effect and section fitted together) is held out against the effect alone: the section must
+                # add to it on points it was not fitted to (against the model before, the effect's share passes it)
+                before = current
+                alone = results.get(new_causes[0]) if len(new_causes) == 2 else None
+                if alone is not None and alone.objective < current.objective:
+                    before = alone
+                try:
+                    held = held_out_gain(before, best, configs, f, data, fixed, impedance_scale, weights=weights,
+                                         max_nfev=HOLDOUT_NFEV, prior=prior, noise=ctx.noise)
+                except _CANDIDATE_FAILURES:
+                    held = -np.inf
+                if held < need:
+                    _log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
+                         "only)", progress)
+                    failed.append({"cause": best.cause, "cost": best.cost,
+                                   "reason": f"held-out gain {held:.3f} below {need} (alternate points)"})
+                    pool.pop(best.cause if best.cause in pool else new_cause)
+                    deferred.add(new_cause)  # tried again once another cause is named: it may hold with it
+                    if not chosen and len(new_causes) == 1:  # a section alone that takes an effect's share: with it
+                        pool.update(_section_pairs(ctx, results, baseline, have=pool))
+                    continue
+            for other in new_causes[:-1] if len(new_causes) > 1 else []:  # a pair: the effect named with the section
+                steps.append({"cause": other, "joint": True, "gain": 1 - best.objective / current.objective,
+                              "delta_bic": current.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
+                              "total_gain": 1 - best.objective / baseline.objective, "model": best.structure})
+                chosen.append(other)
+            new_cause = new_causes[-1]
+            steps.append({"cause": new_cause, "gain": 1 - best.objective / current.objective,
                           "delta_bic": current.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
-                          "total_gain": 1 - best.objective / baseline.objective, "model": best.structure})
-            chosen.append(other)
-        new_cause = new_causes[-1]
-        steps.append({"cause": new_cause, "gain": 1 - best.objective / current.objective,
-                      "delta_bic": current.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
-                      "total_gain": 1 - best.objective / baseline.objective,
-                      "model": best.structure + ("; " if best.structure and best.effects else "")
-                      + ", ".join(e.label for e in best.effects)})
-        chosen.append(new_cause)
-        current = converged(ctx, best, lambda m: _log(m, progress))
-        _log(f"step {len(chosen)}: {new_cause} (gain {steps[-1]['gain']:.3f}, dBIC {steps[-1]['delta_bic']:.1f})",
-             progress)
-        remaining = [c for c in pool if c not in chosen and "+" not in c]
-        remaining += sorted(c for c in deferred if c in results and c not in chosen and c not in remaining)
-        deferred.clear()
-        pool = {}
-        if len(chosen) >= max_causes or ctx.settled(current):
-            continue
-        for cause in remaining:
-            t = time.perf_counter()
-            res = _extend(ctx, current, cause, results[cause], variants_tried.get(cause, []))
-            if res is None or res.objective >= current.objective:
+                          "total_gain": 1 - best.objective / baseline.objective,
+                          "model": best.structure + ("; " if best.structure and best.effects else "")
+                          + ", ".join(e.label for e in best.effects)})
+            chosen.append(new_cause)
+            current = converged(ctx, best, lambda m: _log(m, progress))
+            _log(f"step {len(chosen)}: {new_cause} (gain {steps[-1]['gain']:.3f}, dBIC {steps[-1]['delta_bic']:.1f})",
+                 progress)
+            remaining = [c for c in pool if c not in chosen and "+" not in c]
+            remaining += sorted(c for c in deferred if c in results and c not in chosen and c not in remaining)
+            deferred.clear()
+            pool = {}
+            if len(chosen) >= max_causes or ctx.settled(current):
                 continue
-            pool[cause] = res
-            _log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.objective / current.objective:.3f}, "
-                 f"dBIC {current.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)", progress)
+            pool = _extensions(ctx, current, remaining, results, variants_tried)
 
-    # ---- backward check: a cause made redundant by those named after it is dropped
-    if len(chosen) > 1:
-        n_named = len(chosen)
-        current, chosen, steps = _drop_redundant(ctx, current, chosen, steps, min_delta_bic, progress)
-        if len(chosen) < n_named:  # the order forward selection gives the causes kept: by their single fits
-            chosen.sort(key=lambda c: results[c].bic if c in results else np.inf)
-    if chosen and current.effects and not ctx.settled(current):  # each cause's form against all the others
-        current, swaps = rechoose_forms(ctx, current, min_delta_bic, _CANDIDATE_FAILURES, lambda m: _log(m, progress))
-        steps = steps + swaps
-
+        # ---- backward check: a cause made redundant by those named after it is dropped
+        if len(chosen) > 1:
+            n_named = len(chosen)
+            current, chosen, steps = _drop_redundant(ctx, current, chosen, steps, min_delta_bic, progress)
+            if len(chosen) < n_named:  # the order forward selection gives the causes kept: by their single fits
+                chosen.sort(key=lambda c: results[c].bic if c in results else np.inf)
+        swaps = []
+        if chosen and current.effects and not ctx.settled(current):  # each cause's form against all the others
+            current, swaps = rechoose_forms(ctx, current, min_delta_bic, _CANDIDATE_FAILURES,
+                                            lambda m: _log(m, progress))
+            steps = steps + swaps
+        if round_ or not swaps or len(chosen) >= max_causes or ctx.settled(current):
+            break
+        remaining = [c for c in allowed if c not in chosen]
+        if not remaining:
+            break
+        _log("forms chosen again: " + ", ".join(remaining) + " measured again against the model", progress)
+        pool = _extensions(ctx, current, remaining, results, variants_tried)
     return current, chosen, steps
+
+
+def _extensions(ctx: _Context, current: FitResult, causes: Sequence[str], results: dict[str, FitResult],
+                variants_tried: dict[str, list[Effect]]) -> dict[str, FitResult]:
+    """Each of ``causes`` fitted together with ``current`` (:func:`_extend`): the fits that lower the objective."""
+    pool = {}
+    for cause in causes:
+        t = time.perf_counter()
+        res = _extend(ctx, current, cause, results[cause], variants_tried.get(cause, []))
+        if res is None or res.objective >= current.objective:
+            continue
+        pool[cause] = res
+        _log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.objective / current.objective:.3f}, "
+             f"dBIC {current.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)", ctx.progress)
+    return pool
 
 
 # ============================================================================== fitting causes
@@ -870,7 +893,9 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
                 res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
             except _CANDIDATE_FAILURES:  # the network degenerates without this effect: it stays
                 continue
-            if res.bic - current.bic < min_delta_bic:
+            if res.bic - current.bic >= min_delta_bic:
+                _log(f"{eff.cause} kept: without it the BIC is higher by {res.bic - current.bic:.1f}", progress)
+            else:
                 res.structure = current.structure
                 res.causes = [c for c in current.causes if c != eff.cause]
                 res.cause = "+".join(res.causes)
