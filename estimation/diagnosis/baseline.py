@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from pris_cosim.models import Model, lumped_rlc
 
 from .align import aligned_start
+from .cores import SharedBatch, helper_available, starts_fitted
 from .fit import DiagnosisError, FitResult, FrequencyFit
 
 
@@ -58,21 +61,57 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
         Cost at which the fit from the given values is kept without trying
         the random starts (the noise floor).
     """
-    first = fit.fit_continued(fit.start_vectors()[0], max_nfev=max_nfev)
+    x0 = fit.start_vectors()[0]
+    batch = None
+    if starts > 0 and helper_available() and float(np.sum(fit.residuals(x0) ** 2)) > PRELAUNCH_ABOVE * good_enough:
+        # far from good enough: the random starts' short fits are handed to the helper process (:mod:`.cores`)
+        # before the fit from the given values runs here (the result does not depend on the order)
+        batch = _random_starts(fit, x0, starts, spread, max_nfev)
+    first = fit.fit_continued(x0, max_nfev=max_nfev)
     if first.objective <= good_enough or starts <= 0:
         return first
-    rng = np.random.default_rng(20260101)
-    lo, hi = fit.bounds()
-    x0 = fit.start_vectors()[0]
-    X = np.clip(x0 + spread * rng.standard_normal((starts, x0.size)), lo + 1e-9, hi - 1e-9)
-    # and from the given values with the model's resonances moved onto the measured ones (:mod:`.align`)
-    aligned = aligned_start(fit, x0)
-    if aligned is not None:
-        X = np.vstack([aligned[None], X])
-    short = fit.fit(x0s=X, grid=False, keep_starts=X.shape[0], max_nfev=max(10, max_nfev // 2))
+    short = (batch or _random_starts(fit, x0, starts, spread, max_nfev)).result()
     if short.objective >= first.objective:
         return first
     best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)
     best.wall_s += first.wall_s + short.wall_s
     best.alternative = first  # the optimum reached from the given values: structures are sought from it too
     return best
+
+
+#: The random starts are handed to the helper process before the fit from the given values when the given values
+#: cost more than this many times ``good_enough`` (that fit then seldom makes them unneeded).
+PRELAUNCH_ABOVE = 4.0
+
+
+class _StartsFitted:
+    """The short local fits from the random starts (and the aligned start), screened in one batch and fitted in
+    that order; the tail of that order run by the helper process from creation on (:class:`.cores.SharedBatch`)."""
+
+    def __init__(self, fit: FrequencyFit, X: np.ndarray, max_nfev: int, here: int | None) -> None:
+        self.t0 = time.perf_counter()
+        lo, hi = fit.bounds()
+        self.fit, self.X = fit, np.clip(np.atleast_2d(np.asarray(X, float)), lo + 1e-9, hi - 1e-9)
+        r = fit.residuals_batch(self.X)
+        order = np.argsort(np.sum(r * r, axis=1))
+        self.batch = SharedBatch(starts_fitted, [(fit, self.X[i], {"max_nfev": max_nfev}) for i in order], here)
+
+    def result(self) -> FitResult:
+        """The best fit; of equal costs the first in the screened order (as :meth:`.fit.FrequencyFit.fit`)."""
+        fitted = self.batch.result()
+        best = min(range(len(fitted)), key=lambda i: (fitted[i][1], i))
+        return self.fit.result(fitted[best][0], None, self.X.shape[0] + sum(n for _, _, n in fitted),
+                               time.perf_counter() - self.t0)
+
+
+def _random_starts(fit: FrequencyFit, x0: np.ndarray, starts: int, spread: float, max_nfev: int) -> _StartsFitted:
+    """The random starts around ``x0`` (fixed seed) and the aligned start (:mod:`.align`), their fits begun."""
+    rng = np.random.default_rng(20260101)
+    lo, hi = fit.bounds()
+    X = np.clip(x0 + spread * rng.standard_normal((starts, x0.size)), lo + 1e-9, hi - 1e-9)
+    # and from the given values with the model's resonances moved onto the measured ones (:mod:`.align`)
+    aligned = aligned_start(fit, x0)
+    if aligned is not None:
+        X = np.vstack([aligned[None], X])
+    # this process runs the fit from the given values too: it takes fewer of the short fits
+    return _StartsFitted(fit, X, max(10, max_nfev // 2), here=max(1, (X.shape[0] - 3) // 2))

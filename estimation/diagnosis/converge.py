@@ -12,7 +12,7 @@ further cause only what the model cannot reach.
 Six-response models are left as they are: each of their evaluations costs
 several times more. So is a model with a new section: whether it is at the
 noise with values off the design turns on its residuals' whiteness
-(:meth:`.diagnose._Context.settled`), and refitted further a split that had
+(:meth:`.context.Context.settled`), and refitted further a split that had
 taken a skin effect's share into its values passed that test and stopped
 there (design missing section + skin effect 702).
 """
@@ -38,7 +38,7 @@ def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: Non
 
     Parameters
     ----------
-    ctx : diagnose._Context
+    ctx : context.Context
         The diagnosis's shared data: ``one_port`` and ``fit(circuit, effects, couplings=...)`` are used.
     r : FitResult
         The model just named (circuit values and effect parameters).

@@ -40,7 +40,7 @@ Steps:
    is tried again after the next cause is named, and a section alone refused
    as the first cause is fitted together with each effect (pairs). Selection stops when the cost
    reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`; for one-port data also
-   ``NOISE_MARGIN`` times the floor estimated from the model's residuals, :meth:`_Context.residual_floor`)
+   ``NOISE_MARGIN`` times the floor estimated from the model's residuals, :meth:`Context.residual_floor`)
    without values moved far off the design, or, once a section was added,
    whatever the values (a new section shares the winding's values out anew).
    A new section sought before any other cause is named frees the tight
@@ -60,10 +60,9 @@ Steps:
 from __future__ import annotations
 
 import itertools
-import sys
 import time
-from collections.abc import Container, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -74,131 +73,29 @@ from pris_cosim.frf import Response
 from pris_cosim.models import Configuration, Model, get_model
 
 from .baseline import fit_multistart, lumped_from_data
+from .cores import shared_map, warm_up
 from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
-from .evidence import (band_table, localise, noise_floor, noise_variance, noise_weights, resonance_comparison,
-                       residuals_white, unexplained_bands)
-from .fit import (CANDIDATE_FAILURES, WIDE_CONTINUATION, WIDER_CONTINUATION, DiagnosisError, FitResult, FrequencyFit,
-                  configuration_ports, current_nc, group_names, significant)
-from .drift import GROSS_DRIFT, located_drift, relaxed_drift
+from .evidence import band_table, localise, noise_floor, noise_weights, resonance_comparison, unexplained_bands
+from .fit import (CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit, configuration_ports, current_nc,
+                  group_names, significant)
+from .drift import located_drift, relaxed_drift
 from .converge import converged
 from .holdout import held_out_gain
-from .prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
+from .prior import DEFAULT_TOLERANCE, design_prior
 from .forms import rechoose_forms
 from .realise import realise_extended
 from .result import Diagnosis
-from .sections import section_candidates
-from .unmerge import missing_modes, resolved_points, search_unmerged
-
-MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
-#: Selection stops once the cost is within this factor of the noise floor.
-NOISE_MARGIN = 1.25
-#: Causes that add circuit elements: named only if they also pass the held-out check (:mod:`.holdout`).
-STRUCTURAL = ("missing-section",)
-#: A section split from the nominal circuit is sought when the fitted baseline's cost is this many times the noise
-#: floor (or a measured resonance is missing from it).
-UNMERGE_ABOVE_FLOOR = 10.0
-#: Evaluations per smoothed stage of every seed of the wide split search (:func:`.unmerge.search_unmerged`, one-port
-#: data that no single cause explains): 8 leaves a split of design values 10 % off hundreds of times above the noise,
-#: 20 brings some seed of most such splits to it.
-WIDE_SEED_NFEV = 20
-#: ... and, with every measured resonance already in the model without it, named only if its fit comes within this
-#: factor of ``NOISE_MARGIN`` times the noise floor.
-STRUCTURAL_FLOOR = 2.0
-
+from .section_fits import fit_missing_section, section_pairs
+from .unmerge import missing_modes, resolved_points
+from .context import (MAX_BASELINE_RMS, NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR, UNMERGE_ABOVE_FLOOR, Context,
+                      log)
 
 def _refuse(pool: dict[str, Any], failed: list[dict[str, Any]], best: Any, cause: str, progress: bool,
             message: str, reason: str) -> None:
     """Refuse a structural candidate: say why on stderr, record it in ``failed``, drop it from ``pool``."""
-    _log(f"{cause}: {message}: refused", progress)
+    log(f"{cause}: {message}: refused", progress)
     failed.append({"cause": cause, "cost": best.cost, "reason": reason})
     pool.pop(best.cause if best.cause in pool else cause)
-
-
-def _log(msg: str, progress: bool) -> None:
-    if progress:
-        print(f"diagnose: {msg}", file=sys.stderr, flush=True)
-
-
-@dataclass
-class _Context:
-    """What every fit of one diagnosis shares."""
-
-    f: np.ndarray
-    data: dict[str, np.ndarray]
-    configs: list[Configuration]
-    fixed: tuple[str, ...]
-    scale: float
-    one_port: bool
-    progress: bool
-    nominal: Circuit | None = None
-    floor: float = 0.0
-    #: Noise RMS of each response's log error (:func:`.evidence.noise_floor` ``per_response``).
-    noise: dict[str, float] = field(default_factory=dict)
-    prior: DesignPrior | None = None
-    #: Per-point residual weights by response (:func:`.evidence.noise_weights`); empty: unweighted.
-    weights: dict[str, np.ndarray] = field(default_factory=dict)
-    #: Points quiet enough to show resonances, by response (:func:`.unmerge.resolved_points`); empty: all.
-    resolved: dict[str, np.ndarray] = field(default_factory=dict)
-    #: Every seed of every split fitted (:func:`.unmerge.search_unmerged` ``all_seeds``), for one-port data without
-    #: a cause named; the result does not depend on the baseline, so it is kept.
-    wide_unmerge: bool = False
-    unmerge_cache: dict = field(default_factory=dict)
-
-    def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
-            prior: DesignPrior | None | str = "same", couplings: Sequence[str] = ()) -> FrequencyFit:
-        """The fit of ``circuit`` with ``effects`` (``couplings``: K elements fitted too, see :class:`.fit.FrequencyFit`)."""
-        return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
-                            self.scale, self.prior if isinstance(prior, str) else prior, couplings, self.weights)
-
-    def drift(self, r: FitResult) -> list[dict[str, Any]]:
-        """Values of ``r`` moved beyond the design tolerance (none without a prior)."""
-        if self.prior is None:
-            return []
-        anchored = self.prior.anchored(r.circuit)
-        return self.prior.drift({n: v for n, v in r.values.items() if n.lower() in anchored})
-
-    def gross(self, r: FitResult) -> list[dict[str, Any]]:
-        """The values of ``r`` more than ``GROSS_DRIFT`` tolerances from the design."""
-        return [d for d in self.drift(r) if d["sigmas"] > GROSS_DRIFT]
-
-    def distorted(self, r: FitResult) -> bool:
-        """``r`` moved a value more than ``GROSS_DRIFT`` tolerances from the design (never without a prior)."""
-        return bool(self.gross(r))
-
-    def explained(self, r: FitResult) -> bool:
-        """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
-        return r.objective <= NOISE_MARGIN * self.floor and not self.distorted(r)
-
-    def settled(self, r: FitResult) -> bool:
-        """No further cause is sought after ``r``: it fits to the noise floor (at or below the data's; within
-        ``NOISE_MARGIN`` of :meth:`residual_floor` with white residuals, :func:`.evidence.residuals_white`) without moving
-        any value more than ``GROSS_DRIFT`` tolerances, or it has a new section (which shares the winding's values out
-        anew, so values off the design are its own), fits to the noise floor and, on one-port data, leaves white
-        residuals."""
-        # at or below the data's own floor (an overestimate on a resonant winding) the fit is at the noise anyway;
-        # within the margin above it, only if what is left looks like noise (white along frequency)
-        # (one-port data only, as the residuals' floor: on several responses a few per cent of structure left in a
-        # near-noise fit is the rule, and every extension of a six-response model costs tens of seconds)
-        white = None if not self.one_port or self.weights else residuals_white(r.errors)
-        if r.objective > self.floor and (r.objective > NOISE_MARGIN * self.residual_floor(r) or white is False):
-            return False
-        # a new section with values grossly off the design is at the noise only if what is left looks like noise:
-        # the values moved make up for something else (an effect whose share the drift took)
-        return not self.distorted(r) or (bool(r.structure) and white is not False)
-
-    def residual_floor(self, r: FitResult) -> float:
-        """The noise floor estimated from the third differences of ``r``'s residuals, if below the data's.
-
-        The data's own third differences keep some of a sharp response's
-        curvature (tens of per cent above the noise on a resonant winding);
-        a model that follows the response leaves less of it in its residuals.
-        One-port data without weights only (else the data's floor): measured
-        on several responses, a split that leaves a few per cent of its fit
-        to an effect's form was taken as that effect too.
-        """
-        if self.weights or not self.one_port:
-            return self.floor
-        return min(self.floor, sum(noise_variance(self.f, np.exp(e)) for e in r.errors.values()))
 
 
 def diagnose_frequency(
@@ -256,6 +153,7 @@ def diagnose_frequency(
     """
     from threadpoolctl import threadpool_limits
 
+    warm_up()  # the helper process on another core (:mod:`.cores`), started while the first fits run here
     with threadpool_limits(limits=1):  # small matrices: BLAS threads only contend for the cores
         try:
             return _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_gain, min_step_gain,
@@ -313,14 +211,14 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         baseline = fits[best_i]
         model = Model("lumped-rlc", "Lumped R-L-C fitted to the data", starts[best_i].circuit,
                       starts[best_i].configurations, family=("lumped",))
-        _log(f"no baseline given: lumped R-L-C fitted (cost {baseline.cost:.4g})", progress)
+        log(f"no baseline given: lumped R-L-C fitted (cost {baseline.cost:.4g})", progress)
     else:
         design = FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed, weights=weights)
         prior = design_prior(dict(zip(design.free, design.start)), tolerance, floor["cost"], f.size, len(data),
                              model.circuit)
         baseline = fit_multistart(FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed,
                                                prior=prior, weights=weights), good_enough=NOISE_MARGIN * floor["cost"])
-        _log(f"baseline {model.name} fitted: cost {baseline.cost:.4g} in {baseline.wall_s:.1f} s", progress)
+        log(f"baseline {model.name} fitted: cost {baseline.cost:.4g} in {baseline.wall_s:.1f} s", progress)
     worst = max(float(np.sqrt(np.mean(np.abs(e) ** 2))) for e in baseline.errors.values())
     if worst > MAX_BASELINE_RMS:
         raise DiagnosisError(
@@ -329,7 +227,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         )
     configs = list(model.configurations.values())
     one_port = len(configs) == 1 and all(r.node is None for r in configs[0].responses)
-    ctx = _Context(f, data, configs, fixed, impedance_scale, one_port, progress,
+    ctx = Context(f, data, configs, fixed, impedance_scale, one_port, progress,
                    nominal=model.circuit if model.family != ("lumped",) else None)
     ctx.floor = floor["cost"]
     ctx.noise = dict(floor["per_response"])
@@ -338,9 +236,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     ctx.resolved = resolved_points(sd)
     if prior is not None:
         moved = ctx.drift(baseline)
-        _log(f"design prior: tolerance {prior.tolerance:g}; baseline moved {len(moved)} value(s) beyond it"
+        log(f"design prior: tolerance {prior.tolerance:g}; baseline moved {len(moved)} value(s) beyond it"
              + (": " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in moved[:6]) if moved else ""), progress)
-    _log(f"noise floor {floor['cost']:.3g} (noise RMS "
+    log(f"noise floor {floor['cost']:.3g} (noise RMS "
          + ", ".join(f"{k} {100 * v:.2g} %" for k, v in floor["per_response"].items()) + ")", progress)
 
     # ---- single causes; a candidate's circuit values may fit better than the baseline's own optimum: then the
@@ -349,7 +247,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     results, failed, variants_tried = {}, [], {}
     passes = 0 if ctx.explained(baseline) else 3
     if not passes:
-        _log("the baseline fits to the noise floor within the design tolerance: no cause is fitted", progress)
+        log("the baseline fits to the noise floor within the design tolerance: no cause is fitted", progress)
     for attempt in range(passes):
         res_i, failed_i, variants_i = _single_causes(ctx, todo, baseline, progress)
         for cause, r in res_i.items():
@@ -363,7 +261,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         explained = any(ctx.explained(r) for r in results.values())
         if not moved or explained or attempt == 2:
             break
-        _log("causes fitted again from the refitted baseline", progress)
+        log("causes fitted again from the refitted baseline", progress)
     # ---- one-port data that no single cause explains, far above the noise or fitted only by distorted values: every
     # seed of every split of the design (the picked seeds of a split whose values are all 10 % off stay far above)
     if (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes
@@ -372,14 +270,14 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         t = time.perf_counter()
         ctx.wide_unmerge = True
         try:
-            wide = _fit_missing_section(ctx, baseline, [], must_beat=baseline.objective)
+            wide = fit_missing_section(ctx, baseline, [], must_beat=baseline.objective)
         except _CANDIDATE_FAILURES:
             wide = None
         if wide is not None and wide.objective < min(baseline.objective, results["missing-section"].objective
                                                      if "missing-section" in results else np.inf):
             results["missing-section"] = wide
             failed = [x for x in failed if x["cause"] != "missing-section"]
-            _log(f"missing-section (every seed of every split): {wide.structure}: cost {wide.cost:.4g}, gain "
+            log(f"missing-section (every seed of every split): {wide.structure}: cost {wide.cost:.4g}, gain "
                  f"{1 - wide.cost / baseline.cost:.3f}, dBIC {baseline.bic - wide.bic:.1f} "
                  f"({time.perf_counter() - t:.1f} s)", progress)
     for cause in list(results):
@@ -392,7 +290,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if ("missing-section" in todo and max_causes >= 2 and baseline.cost > UNMERGE_ABOVE_FLOOR * floor["cost"]
             and not any(significant(baseline.bic, baseline.objective, r.bic, r.objective, min_delta_bic, min_gain)
                         for r in results.values())):
-        pool.update(_section_pairs(ctx, results, baseline))
+        pool.update(section_pairs(ctx, results, baseline))
 
     # ---- forward selection, then a backward check; a section named with other causes is checked against the
     # selection without it (a section's free values take a share of any effect, and a greedy first step that names
@@ -402,26 +300,26 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if any(c in STRUCTURAL for c in chosen) and (len(chosen) > 1 or not ctx.explained(current)):
         alt_pool = {c: r for c, r in pool.items() if not any(s in c.split("+") for s in STRUCTURAL)}
         if alt_pool:
-            _log("selection again without " + ", ".join(c for c in chosen if c in STRUCTURAL), progress)
+            log("selection again without " + ", ".join(c for c in chosen if c in STRUCTURAL), progress)
             alt_failed: list[dict[str, Any]] = []
             alt = _select(ctx, baseline, alt_pool, results, variants_tried, alt_failed, **opts)
             # kept when it is better both ways: a lower BIC and a data cost no higher (under the prior, a model
             # that fits the data worse can win the BIC on the penalty of the values a section moved), or a lower
             # BIC at the noise floor (both fit to the noise: what the section adds to the fit is noise)
             if alt[1] and alt[0].bic < current.bic and (alt[0].cost <= current.cost or ctx.settled(alt[0])):
-                _log(f"{', '.join(alt[1])} without the section: BIC lower by {current.bic - alt[0].bic:.1f} "
+                log(f"{', '.join(alt[1])} without the section: BIC lower by {current.bic - alt[0].bic:.1f} "
                      f"than {', '.join(chosen)}, cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against "
                      f"{current.cost:.4g} + {current.penalty:.4g}: kept", progress)
                 current, chosen, steps = alt
                 failed += alt_failed
             else:
-                _log(f"without the section ({', '.join(alt[1]) or 'none'}): BIC {alt[0].bic - current.bic:+.1f}, "
+                log(f"without the section ({', '.join(alt[1]) or 'none'}): BIC {alt[0].bic - current.bic:+.1f}, "
                      f"cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against {current.cost:.4g} + {current.penalty:.4g}: the "
                      "section stays", progress)
     extended = current if chosen else None
     # ---- a value of the design really off: one value freed may explain what the prior's spread-out fit leaves
     if prior is not None and not ctx.explained(extended or baseline):
-        located = located_drift(ctx, extended or baseline, NOISE_MARGIN * floor["cost"], lambda m: _log(m, progress))
+        located = located_drift(ctx, extended or baseline, NOISE_MARGIN * floor["cost"], lambda m: log(m, progress))
         if located is not None:
             located.structure = (extended or baseline).structure
             if extended is not None:
@@ -434,11 +332,11 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                      noise=floor, failed=failed)
     final = extended or baseline
     diag.tolerance = float(tolerance) if prior is not None else float("inf")
-    diag.drift = relaxed_drift(ctx, final, lambda m: _log(m, progress))
+    diag.drift = relaxed_drift(ctx, final, lambda m: log(m, progress))
     diag.baseline_drift = ctx.drift(baseline)
     diag.drift_alternatives = list(getattr(final, "drift_alternatives", []))
     if diag.drift:
-        _log("values beyond the design tolerance in the final model: "
+        log("values beyond the design tolerance in the final model: "
              + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift),
              progress)
     diag.unexplained = unexplained_bands(f, {n: e * weights[n] if n in weights else e for n, e in final.errors.items()},
@@ -460,11 +358,11 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if extended is not None:
         diag.realisation = realise_extended(extended, configs, f)
     diag.wall_s = time.perf_counter() - t0
-    _log(f"causes: {', '.join(chosen) or 'none'} (gain {diag.gain:.3f}) in {diag.wall_s:.1f} s", progress)
+    log(f"causes: {', '.join(chosen) or 'none'} (gain {diag.gain:.3f}) in {diag.wall_s:.1f} s", progress)
     return diag
 
 
-def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], results: dict[str, FitResult],
+def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], results: dict[str, FitResult],
             variants_tried: dict[str, list[Effect]], failed: list[dict[str, Any]], min_delta_bic: float,
             min_gain: float, min_step_gain: float, max_causes: int
             ) -> tuple[FitResult, list[str], list[dict[str, Any]]]:
@@ -481,7 +379,7 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
     for round_ in range(2):
         while pool and len(chosen) < max_causes:
             if ctx.settled(current):
-                _log("cost at the noise floor: no further cause", progress)
+                log("cost at the noise floor: no further cause", progress)
                 break
             best = min(pool.values(), key=lambda r: r.bic)
             need = min_gain if not chosen else min_step_gain
@@ -529,14 +427,14 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
                 except _CANDIDATE_FAILURES:
                     held = -np.inf
                 if held < need:
-                    _log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
+                    log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
                          "only)", progress)
                     failed.append({"cause": best.cause, "cost": best.cost,
                                    "reason": f"held-out gain {held:.3f} below {need} (alternate points)"})
                     pool.pop(best.cause if best.cause in pool else new_cause)
                     deferred.add(new_cause)  # tried again once another cause is named: it may hold with it
                     if not chosen and len(new_causes) == 1:  # a section alone that takes an effect's share: with it
-                        pool.update(_section_pairs(ctx, results, baseline, have=pool))
+                        pool.update(section_pairs(ctx, results, baseline, have=pool))
                     continue
             for other in new_causes[:-1] if len(new_causes) > 1 else []:  # a pair: the effect named with the section
                 steps.append({"cause": other, "joint": True, "gain": 1 - best.objective / current.objective,
@@ -550,8 +448,8 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
                           "model": best.structure + ("; " if best.structure and best.effects else "")
                           + ", ".join(e.label for e in best.effects)})
             chosen.append(new_cause)
-            current = converged(ctx, best, lambda m: _log(m, progress))
-            _log(f"step {len(chosen)}: {new_cause} (gain {steps[-1]['gain']:.3f}, dBIC {steps[-1]['delta_bic']:.1f})",
+            current = converged(ctx, best, lambda m: log(m, progress))
+            log(f"step {len(chosen)}: {new_cause} (gain {steps[-1]['gain']:.3f}, dBIC {steps[-1]['delta_bic']:.1f})",
                  progress)
             remaining = [c for c in pool if c not in chosen and "+" not in c]
             remaining += sorted(c for c in deferred if c in results and c not in chosen and c not in remaining)
@@ -570,19 +468,19 @@ def _select(ctx: _Context, baseline: FitResult, pool: dict[str, FitResult], resu
         swaps = []
         if chosen and current.effects and not ctx.settled(current):  # each cause's form against all the others
             current, swaps = rechoose_forms(ctx, current, min_delta_bic, _CANDIDATE_FAILURES,
-                                            lambda m: _log(m, progress))
+                                            lambda m: log(m, progress))
             steps = steps + swaps
         if round_ or not swaps or len(chosen) >= max_causes or ctx.settled(current):
             break
         remaining = [c for c in allowed if c not in chosen]
         if not remaining:
             break
-        _log("forms chosen again: " + ", ".join(remaining) + " measured again against the model", progress)
+        log("forms chosen again: " + ", ".join(remaining) + " measured again against the model", progress)
         pool = _extensions(ctx, current, remaining, results, variants_tried)
     return current, chosen, steps
 
 
-def _extensions(ctx: _Context, current: FitResult, causes: Sequence[str], results: dict[str, FitResult],
+def _extensions(ctx: Context, current: FitResult, causes: Sequence[str], results: dict[str, FitResult],
                 variants_tried: dict[str, list[Effect]]) -> dict[str, FitResult]:
     """Each of ``causes`` fitted together with ``current`` (:func:`_extend`): the fits that lower the objective."""
     pool = {}
@@ -592,7 +490,7 @@ def _extensions(ctx: _Context, current: FitResult, causes: Sequence[str], result
         if res is None or res.objective >= current.objective:
             continue
         pool[cause] = res
-        _log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.objective / current.objective:.3f}, "
+        log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.objective / current.objective:.3f}, "
              f"dBIC {current.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)", ctx.progress)
     return pool
 
@@ -603,13 +501,13 @@ def _extensions(ctx: _Context, current: FitResult, causes: Sequence[str], result
 HOLDOUT_NFEV = 100
 
 
-def _effect_starts(ctx: _Context, fit: FrequencyFit, effect: Effect) -> list[dict[str, float]] | None:
+def _effect_starts(ctx: Context, fit: FrequencyFit, effect: Effect) -> list[dict[str, float]] | None:
     if isinstance(effect, CoreLoss):
         return effect.starts(fit.circuit, fit.circuit.resolve(check=False), ctx.scale, float(ctx.f[0]), float(ctx.f[-1]))
     return None
 
 
-def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top: int = 2,
+def _fit_cause(ctx: Context, cause: str, base: FitResult, must_beat: float, top: int = 2,
                from_nominal: bool = True) -> tuple[FitResult | None, list[Effect]]:
     """Every form and group of ``cause``: effect-only fits from the start grids, then the best in full.
 
@@ -631,30 +529,43 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
                               else []):
         if pools and best is not None and ctx.explained(best):
             break  # explained to the noise from the fitted baseline: the design values are not needed
-        screened = []
-        for eff in variants:
-            try:
-                fit = ctx.fit(start, [eff])
-                pre = fit.fit([_effect_starts(ctx, fit, eff)], circuit_free=False, max_nfev=40, keep_starts=2)
-            except _CANDIDATE_FAILURES:
-                continue
-            screened.append((pre.cost, eff, fit, pre))
+        # the forms screened, then the best refined, each batch shared with the helper process (:mod:`.cores`)
+        screened = [(pre.cost, eff, fit, pre) for eff, (fit, pre) in
+                    zip(variants, shared_map(_screened_form, [(ctx, start, eff) for eff in variants])) if pre]
         screened.sort(key=lambda t: t[0])
         pools.append(screened)
         # a form that is a special case of another screened form (one relaxation time of a distribution) is not
         # refined: the wider form's fit covers it, and it would take the place of another form
-        refine = [t for t in screened if not any(t[1].nested_in(u[1]) for u in screened)]
-        for i, (cost, eff, fit, pre) in enumerate(refine[:top if len(pools) == 1 else 1]):
+        refine = [t for t in screened if not any(t[1].nested_in(u[1]) for u in screened)][:top if len(pools) == 1
+                                                                                          else 1]
+        nfev = 50 if len(pools) == 1 else 30
+        refined = shared_map(_refined_form, [(ctx, fit, eff, pre, must_beat, nfev) for _, eff, fit, pre in refine])
+        for i, ((cost, *_), res) in enumerate(zip(refine, refined)):
             if i and best is not None and best.objective < must_beat and cost > 2 * screened[0][0]:
-                break  # a clearly worse variant is not refined
-            try:
-                res = fit.fit([_effect_starts(ctx, fit, eff)], x0s=pre.x[None], keep_starts=1, must_beat=must_beat,
-                              max_nfev=50 if len(pools) == 1 else 30, tol=1e-6)
-            except _CANDIDATE_FAILURES:
-                continue
-            if best is None or res.objective < best.objective:
+                break  # a clearly worse variant is not refined (its fit, run beside the first, is not used)
+            if res is not None and (best is None or res.objective < best.objective):
                 best = res
     return best, [t[1] for t in pools[0]]
+
+
+def _screened_form(args: tuple[Context, Circuit, Effect]) -> tuple[FrequencyFit | None, FitResult | None]:
+    """The effect's parameters alone fitted from its start grid on ``circuit`` (:func:`_fit_cause`)."""
+    ctx, circuit, eff = args
+    try:
+        fit = ctx.fit(circuit, [eff])
+        return fit, fit.fit([_effect_starts(ctx, fit, eff)], circuit_free=False, max_nfev=40, keep_starts=2)
+    except _CANDIDATE_FAILURES:
+        return None, None
+
+
+def _refined_form(args: tuple[Context, FrequencyFit, Effect, FitResult, float, int]) -> FitResult | None:
+    """A screened form fitted in full, circuit values free (:func:`_fit_cause`)."""
+    ctx, fit, eff, pre, must_beat, nfev = args
+    try:
+        return fit.fit([_effect_starts(ctx, fit, eff)], x0s=pre.x[None], keep_starts=1, must_beat=must_beat,
+                       max_nfev=nfev, tol=1e-6)
+    except _CANDIDATE_FAILURES:
+        return None
 
 
 #: What a candidate's fit may raise when its parameters make the network degenerate (e.g. a node left with
@@ -662,142 +573,7 @@ def _fit_cause(ctx: _Context, cause: str, base: FitResult, must_beat: float, top
 _CANDIDATE_FAILURES = CANDIDATE_FAILURES
 
 
-def _fit_missing_section(ctx: _Context, base: FitResult, effects: Sequence[Effect], must_beat: float,
-                         top: int = 2) -> FitResult | None:
-    """Every split and end addition: the new elements fitted alone first, the best ``top`` then in full.
-
-    With ``effects`` (causes already named) their fitted parameters start
-    every fit and stay free. When the measurement has a resonance the fitted
-    model lacks, or the model stays far above the noise, the sections split
-    from the nominal circuit (:func:`.unmerge.search_unmerged`) are tried too.
-    """
-    circuit = base.fitted_circuit()
-    ports = configuration_ports(ctx.configs)
-    tail = base.x[current_nc(base):] if effects else np.zeros(0)
-    staged = []
-    for cand in section_candidates(circuit, ports):
-        # one port, after a frequency-dependent cause: a section with free couplings would only take its rest
-        if effects and ctx.one_port:
-            cand.couplings = []
-        try:
-            whole = ctx.fit(cand.circuit, effects, couplings=cand.couplings)
-            new = {n.lower() for n in list(cand.new_elements) + list(cand.couplings)}
-            first = ctx.fit(cand.circuit, effects, fixed=[n for n in whole.free if n.lower() not in new],
-                            couplings=cand.couplings)
-            r = first.fit(x0s=np.concatenate([np.zeros(first.nc), tail])[None], grid=False, max_nfev=15, tol=1e-5)
-        except _CANDIDATE_FAILURES:  # a structure the data drive into a degenerate network: not a candidate
-            continue
-        staged.append((r.cost, cand, r))
-    staged.sort(key=lambda t: t[0])
-    best = None
-    for i, (_, cand, first) in enumerate(staged):
-        if i >= top and (best is not None and best.objective < must_beat or i >= top + 3):
-            break
-        try:
-            fit = ctx.fit(cand.circuit.with_values(first.values), effects, couplings=cand.couplings)
-            res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), first.x[current_nc(first):]])[None], grid=False,
-                          max_nfev=60, tol=1e-6)
-        except _CANDIDATE_FAILURES:
-            continue
-        res.structure = cand.how
-        res.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"] if effects else \
-            ["missing-section"]
-        res.cause = "+".join(res.causes)
-        if best is None or res.objective < best.objective:
-            best = res
-    # a missing section alone (no cause named yet): the design's sections split with their couplings free
-    if not effects and ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor
-                                                    or ctx.distorted(base)):
-        split = _split_nominal(ctx, effects, tail, ports)
-        if split is not None and (best is None or split.objective < best.objective):
-            best = split
-            best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
-            best.cause = "+".join(best.causes)
-    if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
-                                    or missing_modes(ctx.f, ctx.data, base.predicted, ctx.resolved) > 0):
-        wide = ctx.wide_unmerge and not effects and ctx.one_port
-        found = ctx.unmerge_cache.get("wide") if wide else None
-        if found is None:
-            found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
-                                    tail, free_couplings=not effects, resolved=ctx.resolved, all_seeds=wide,
-                                    seed_nfev=WIDE_SEED_NFEV, schedules=(WIDE_CONTINUATION, WIDER_CONTINUATION),
-                                    good_enough=NOISE_MARGIN * STRUCTURAL_FLOOR * ctx.floor)
-            if wide:
-                ctx.unmerge_cache["wide"] = found
-        if found is not None and (best is None or found[0].objective < best.objective):
-            best, um, merged = found
-            best.structure = um.candidate.how
-            best.merged_back = {**merged.values, **um.merged_back(merged.fitted_circuit())}
-            best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
-            best.cause = "+".join(best.causes)
-    return best
-
-
-#: Splits of the nominal circuit (:func:`_split_nominal`): evaluations of each screening fit and of the final fit.
-NOMINAL_SCREEN_NFEV = 15
-NOMINAL_NFEV = 100
-
-
-def _split_nominal(ctx: _Context, effects: Sequence[Effect], tail: np.ndarray, ports: Sequence[str]
-                   ) -> FitResult | None:
-    """Every section of the nominal circuit split in two, every value and the touched (tight) couplings free.
-
-    A fitted baseline far from the data has distorted values that a split
-    started from it keeps; the design values are free of that. Each split is
-    screened by a short fit of all its values, the best is fitted in full.
-    """
-    screened = []
-    for cand in section_candidates(ctx.nominal, ports, grid=()):
-        if not cand.couplings:  # loosely coupled: the splits of the nominal circuit are :mod:`.unmerge`'s
-            continue
-        try:
-            fit = ctx.fit(cand.circuit, effects, couplings=cand.couplings)
-            r = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=NOMINAL_SCREEN_NFEV,
-                        tol=1e-5)
-        except _CANDIDATE_FAILURES:
-            continue
-        screened.append((r.objective, cand, fit, r))
-    if not screened:
-        return None
-    _, cand, fit, first = min(screened, key=lambda t: t[0])
-    try:
-        res = fit.fit(x0s=first.x[None], grid=False, max_nfev=NOMINAL_NFEV, tol=1e-7)
-    except _CANDIDATE_FAILURES:
-        res = first
-    res.structure = f"{cand.how} (from the design values)"
-    res.from_design = True
-    return res
-
-
-def _section_pairs(ctx: _Context, results: dict[str, FitResult], baseline: FitResult,
-                   have: Container[str] = ()) -> dict[str, FitResult]:
-    """A missing section fitted together with each continuous effect's single fit, by the pair's cause name.
-
-    Sought when no single cause is enough, and when a section alone, the
-    best first cause, is refused by the held-out check: fitted alone, its
-    values take a share of an effect that is there too and fail on the
-    points left out (design missing section + skin effect 703: the split
-    alone gained 0.54, held out -0.08; with the skin effect, 0.83). Pairs
-    already in ``have`` are not fitted again.
-    """
-    pairs = {}
-    for cause, single in results.items():
-        if cause in STRUCTURAL or not single.effects or f"{cause}+missing-section" in have:
-            continue
-        t = time.perf_counter()
-        try:
-            pair = _fit_missing_section(ctx, single, single.effects, must_beat=single.objective)
-        except _CANDIDATE_FAILURES:
-            pair = None
-        if pair is None or pair.objective >= single.objective:
-            continue
-        pairs[pair.cause] = pair
-        _log(f"pair {pair.cause}: cost {pair.cost:.4g}, gain {1 - pair.objective / baseline.objective:.3f}, "
-             f"dBIC {baseline.bic - pair.bic:.1f} ({time.perf_counter() - t:.1f} s)", ctx.progress)
-    return pairs
-
-
-def _polish_baseline(ctx: _Context, baseline: FitResult, fits, progress: bool) -> FitResult:
+def _polish_baseline(ctx: Context, baseline: FitResult, fits, progress: bool) -> FitResult:
     """Refit the baseline from each candidate's circuit values; keep the best baseline.
 
     Candidates of the same structure give their values; a section split from
@@ -807,26 +583,32 @@ def _polish_baseline(ctx: _Context, baseline: FitResult, fits, progress: bool) -
     """
     best = baseline
     free = {n.lower() for n in baseline.values}
+    jobs = []
     for r in sorted(fits, key=lambda r: r.objective):
-        values = r.values
         if getattr(r, "merged_back", None):  # a split fitted from the nominal: its two sections merged again
-            values = {n: v for n, v in r.merged_back.items() if n.lower() in free}
-        elif r.structure or _topology(r.circuit) != _topology(baseline.circuit):
-            continue
-        try:
-            trial = ctx.fit(baseline.circuit.with_values(values)).fit(
-                max_nfev=200 if values is not r.values else 80, tol=1e-8)
-        except _CANDIDATE_FAILURES:
-            continue
-        if trial.objective < best.objective * (1 - 1e-6):
+            jobs.append((ctx, baseline.circuit.with_values({n: v for n, v in r.merged_back.items() if n.lower() in free}),
+                         200))
+        elif not r.structure and _topology(r.circuit) == _topology(baseline.circuit):
+            jobs.append((ctx, baseline.circuit.with_values(r.values), 80))
+    for trial in shared_map(_baseline_refitted, jobs):  # shared with the helper process (:mod:`.cores`)
+        if trial is not None and trial.objective < best.objective * (1 - 1e-6):
             best = trial
     if best is not baseline:
         best.wall_s += baseline.wall_s
-        _log(f"baseline refitted from a candidate's values: cost {baseline.cost:.4g} -> {best.cost:.4g}", progress)
+        log(f"baseline refitted from a candidate's values: cost {baseline.cost:.4g} -> {best.cost:.4g}", progress)
     return best
 
 
-def _single_causes(ctx: _Context, todo: Sequence[str], baseline: FitResult, progress: bool
+def _baseline_refitted(args: tuple[Context, Circuit, int]) -> FitResult | None:
+    """The baseline (no effect) fitted from a candidate's circuit values (:func:`_polish_baseline`)."""
+    ctx, circuit, nfev = args
+    try:
+        return ctx.fit(circuit).fit(max_nfev=nfev, tol=1e-8)
+    except _CANDIDATE_FAILURES:
+        return None
+
+
+def _single_causes(ctx: Context, todo: Sequence[str], baseline: FitResult, progress: bool
                    ) -> tuple[dict[str, FitResult], list[dict[str, Any]], dict[str, list[Effect]]]:
     """Each cause fitted alone with the baseline's values; the fits that end above the baseline are failed."""
     results: dict[str, FitResult] = {}
@@ -835,13 +617,13 @@ def _single_causes(ctx: _Context, todo: Sequence[str], baseline: FitResult, prog
     for cause in todo:
         t = time.perf_counter()
         if cause == "missing-section":
-            res = _fit_missing_section(ctx, baseline, [], must_beat=baseline.objective)
+            res = fit_missing_section(ctx, baseline, [], must_beat=baseline.objective)
             # the structures also from the baseline's optimum nearest the given values (:func:`fit_multistart`):
             # a split of a better-fitting but more distorted optimum can stop far above the split of the other
             # (not once another cause explains the data to the noise: the split then only has to be ranked)
             alt = getattr(baseline, "alternative", None)
             if alt is not None and not any(ctx.explained(r) for r in results.values()):
-                other = _fit_missing_section(ctx, alt, [], must_beat=baseline.objective)
+                other = fit_missing_section(ctx, alt, [], must_beat=baseline.objective)
                 if other is not None and (res is None or other.objective < res.objective):
                     res = other
         else:
@@ -857,16 +639,16 @@ def _single_causes(ctx: _Context, todo: Sequence[str], baseline: FitResult, prog
             continue
         if res.objective >= baseline.objective:
             failed.append({"cause": cause, "cost": res.cost, "reason": "every start ended at or above the baseline cost"})
-            _log(f"{cause}: failed (cost {res.cost:.4g} >= baseline {baseline.cost:.4g})", progress)
+            log(f"{cause}: failed (cost {res.cost:.4g} >= baseline {baseline.cost:.4g})", progress)
             continue
         results[cause] = res
-        _log(f"{cause}: {res.structure or res.effects[0].label}: cost {res.cost:.4g}, gain "
+        log(f"{cause}: {res.structure or res.effects[0].label}: cost {res.cost:.4g}, gain "
              f"{1 - res.cost / baseline.cost:.3f}, dBIC {baseline.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)",
              progress)
     return results, failed, variants_tried
 
 
-def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps: list[dict[str, Any]],
+def _drop_redundant(ctx: Context, current: FitResult, chosen: list[str], steps: list[dict[str, Any]],
                     min_delta_bic: float, progress: bool) -> tuple[FitResult, list[str], list[dict[str, Any]]]:
     """Refit without each named effect in turn (warm start); drop it when the BIC does not worsen by ``min_delta_bic``.
 
@@ -894,12 +676,12 @@ def _drop_redundant(ctx: _Context, current: FitResult, chosen: list[str], steps:
             except _CANDIDATE_FAILURES:  # the network degenerates without this effect: it stays
                 continue
             if res.bic - current.bic >= min_delta_bic:
-                _log(f"{eff.cause} kept: without it the BIC is higher by {res.bic - current.bic:.1f}", progress)
+                log(f"{eff.cause} kept: without it the BIC is higher by {res.bic - current.bic:.1f}", progress)
             else:
                 res.structure = current.structure
                 res.causes = [c for c in current.causes if c != eff.cause]
                 res.cause = "+".join(res.causes)
-                _log(f"{eff.cause} dropped: redundant once {', '.join(res.causes)} are in the model "
+                log(f"{eff.cause} dropped: redundant once {', '.join(res.causes)} are in the model "
                      f"(dBIC {current.bic - res.bic:.1f})", progress)
                 steps = steps + [{"cause": eff.cause, "dropped": True, "delta_bic": current.bic - res.bic,
                                   "cost": res.cost, "gain": 1 - res.objective / current.objective}]
@@ -915,11 +697,11 @@ def _topology(circuit: Circuit) -> list[tuple[str, str, tuple[str, ...]]]:
     return [(e.name.lower(), e.kind, tuple(e.nodes)) for e in circuit.elements]
 
 
-def _extend(ctx: _Context, current: FitResult, cause: str, single: FitResult, variants: Sequence[Effect]
+def _extend(ctx: Context, current: FitResult, cause: str, single: FitResult, variants: Sequence[Effect]
             ) -> FitResult | None:
     """``current`` plus ``cause``, warm-started from ``current`` and from the cause's own single fit."""
     if cause == "missing-section":
-        return _fit_missing_section(ctx, current, current.effects, must_beat=current.objective)
+        return fit_missing_section(ctx, current, current.effects, must_beat=current.objective)
     circuit = current.fitted_circuit()
     order = [single.effects[0]] + [v for v in variants if v.label != single.effects[0].label][:2]
     cur_tail = list(current.x[current_nc(current):])
@@ -950,7 +732,7 @@ def _extend(ctx: _Context, current: FitResult, cause: str, single: FitResult, va
     return best
 
 
-def _design_x(ctx: _Context, fit: FrequencyFit) -> np.ndarray | None:
+def _design_x(ctx: Context, fit: FrequencyFit) -> np.ndarray | None:
     """The circuit part of ``fit``'s parameter vector at the design values (``None`` without a design prior).
 
     Values the prior does not anchor (elements of a changed section, added elements) keep their start.

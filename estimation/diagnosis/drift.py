@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .align import aligned_start, resonance_mismatch
+from .cores import shared_map
 from .fit import CANDIDATE_FAILURES, FitResult, current_nc
 
 #: A fit that reaches the noise floor but moves a value more than this many tolerances from the design
@@ -76,40 +77,50 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
     # of the tolerance on its side (design x (1 + tolerance) or / (1 + tolerance); the others refitted, its own
     # prior left out of both), the fit must lose DRIFT_MIN_DBIC. A value not freed above is freed for this check
     # (the prior held it near the tolerance while the others made up for it), and reported with its freed value.
+    checks = shared_map(_held_check, [(ctx, current, freed, d) for d in drift[:MAX_HELD]])
     kept = []
-    tail = current.x[current_nc(current):]
-    for d in drift[:MAX_HELD]:
-        name = d["name"]
-        loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items()
-                                           if k not in freed and k != name.lower()})
-        try:
-            free_fit = current
-            if name.lower() not in freed:
-                fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
-                free_fit = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60,
-                                   tol=1e-7)
-                moved = ctx.prior.drift({name: free_fit.values[name]})
-                if not moved:
-                    log(f"{name}: x{d['ratio']:.3g} off the design, back within the tolerance once freed: "
-                        "not reported")
-                    continue
-                d = moved[0]
-            edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
-            held = free_fit.fitted_circuit().with_values({name: edge})
-            fit = ctx.fit(held, current.effects, fixed=[name], prior=loose, couplings=current.couplings)
-            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), free_fit.x[current_nc(free_fit):]])[None],
-                            grid=False, max_nfev=40, tol=1e-6)
-        except CANDIDATE_FAILURES:
+    for d, message in checks:
+        if message:
+            log(message)
+        if d is not None:
             kept.append(d)
-            continue
-        # the freed fit carries the same prior as the held one (its own value's term left out)
-        d["delta_bic"] = float(trial.bic - free_fit.bic)
-        if d["delta_bic"] >= DRIFT_MIN_DBIC:
-            kept.append(d)
-        else:
-            log(f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
-                f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
     return kept
+
+
+def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple[dict[str, Any] | None, str]:
+    """One drifted value freed from the prior, then held at the tolerance's edge (:func:`relaxed_drift`).
+
+    ``(ctx, model, freed, drift entry)`` to the entry to report (or None)
+    and a progress line (or ``""``).
+    """
+    ctx, current, freed, d = args
+    name = d["name"]
+    tail = current.x[current_nc(current):]
+    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items()
+                                       if k not in freed and k != name.lower()})
+    try:
+        free_fit = current
+        if name.lower() not in freed:
+            fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
+            free_fit = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60,
+                               tol=1e-7)
+            moved = ctx.prior.drift({name: free_fit.values[name]})
+            if not moved:
+                return None, f"{name}: x{d['ratio']:.3g} off the design, back within the tolerance once freed: not reported"
+            d = moved[0]
+        edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
+        held = free_fit.fitted_circuit().with_values({name: edge})
+        fit = ctx.fit(held, current.effects, fixed=[name], prior=loose, couplings=current.couplings)
+        trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), free_fit.x[current_nc(free_fit):]])[None],
+                        grid=False, max_nfev=40, tol=1e-6)
+    except CANDIDATE_FAILURES:
+        return d, ""
+    # the freed fit carries the same prior as the held one (its own value's term left out)
+    d["delta_bic"] = float(trial.bic - free_fit.bic)
+    if d["delta_bic"] >= DRIFT_MIN_DBIC:
+        return d, ""
+    return None, (f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
+                  f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
 
 
 #: Range (ratios to the design) and points of the scan of each value tried as the one off the design

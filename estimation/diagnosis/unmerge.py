@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -46,6 +47,7 @@ from pris_cosim.errors import CircuitError
 from pris_cosim.expressions import Expression
 
 from ..resonances import find_resonances
+from .cores import shared_map
 from .sections import (Chain, SectionCandidate, _make_pd, _unique, coupling_decay, coupling_matrix, find_chains,
                        split_section, touched_couplings)
 
@@ -399,9 +401,9 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
     """
     from .fit import WIDE_CONTINUATION, DiagnosisError
 
-    screened, continued = [], []
+    continued: list[tuple] = []
     schedules = list(schedules or [WIDE_CONTINUATION])
-    fits = []
+    fits, jobs = [], []
     for um in unmerged_candidates(nominal, ports):
         try:
             fit = make_fit(um.candidate.circuit, ())
@@ -416,30 +418,41 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
         pick = list(np.lexsort((cost, score))[:by_resonance])
         pick += [i for i in np.argsort(cost) if i not in pick][:by_cost]
         pick += [] if 0 in pick else [0]  # the plain split (:meth:`Unmerged.seeds`' first) is always fitted
-        for i in pick:
-            try:
-                res = fit.fit(x0s=rows[i][None], grid=False, max_nfev=screen_nfev, tol=1e-6)
-            except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
-                continue
-            screened.append((res.cost, um, fit, res))
+        jobs += [(um, fit, rows[i]) for i in pick]
         fits.append((um, fit, rows))
+    # the short fits of the picked seeds, shared with the helper process (:mod:`.cores`)
+    done = shared_map(_seed_fitted, [(fit, row, {"max_nfev": screen_nfev}) for _, fit, row in jobs])
+    screened = [(res.cost, um, fit, res) for (um, fit, _), res in zip(jobs, done) if res is not None]
     for stages in schedules if all_seeds else []:
-        for um, fit, rows in fits:
-            fitted = []
-            for i in range(len(rows)):  # which seed leads to the measured resonances shows only once it is fitted
-                try:
-                    # continued through smoothed errors: the seeds' resonances are tens of per cent off the measured
-                    res = fit.fit_continued(rows[i], stages=stages, stage_nfev=seed_nfev, max_nfev=seed_nfev, tol=1e-6,
-                                            prior_in_stages=False)
-                except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
-                    continue
-                fitted.append((res.cost, um, fit, res))
+        # every seed continued through smoothed errors (the seeds' resonances are tens of per cent off the
+        # measured): which seed leads to the measured resonances shows only once it is fitted
+        jobs = [(um, fit, row) for um, fit, rows in fits for row in rows]
+        done = shared_map(_seed_fitted, [(fit, row, {"stages": stages, "seed_nfev": seed_nfev})
+                                         for _, fit, row in jobs])
+        for um, fit, _ in fits:
+            fitted = [(res.cost, um, fit, res) for (u, _, _), res in zip(jobs, done) if u is um and res is not None]
             continued += sorted(fitted, key=lambda t: t[0])[:by_resonance + by_cost]
         if continued and min(t[3].objective for t in continued) <= good_enough:
             break
     found = [_finish(min(group, key=lambda t: t[0]), make_fit, max_nfev, coupling_nfev, free_couplings)
              for group in (screened, continued) if group]
     return min(found, key=lambda t: t[0].objective) if found else None
+
+
+def _seed_fitted(args: tuple[Any, np.ndarray, dict[str, Any]]) -> Any:
+    """A seed's local fit (:func:`search_unmerged`): ``(fit, seed, options)`` to the fit result, or None when the
+    network degenerates. With ``stages`` in the options it is continued through smoothed errors
+    (:meth:`.fit.FrequencyFit.fit_continued`, the prior out of the smoothed stages), else a short plain fit."""
+    from .fit import DiagnosisError
+
+    fit, row, opts = args
+    try:
+        if "stages" in opts:
+            return fit.fit_continued(row, stages=opts["stages"], stage_nfev=opts["seed_nfev"],
+                                     max_nfev=opts["seed_nfev"], tol=1e-6, prior_in_stages=False)
+        return fit.fit(x0s=row[None], grid=False, max_nfev=opts["max_nfev"], tol=1e-6)
+    except (DiagnosisError, ValueError, CircuitError, np.linalg.LinAlgError):
+        return None
 
 
 def _finish(best: tuple, make_fit: Callable, max_nfev: int, coupling_nfev: int, free_couplings: bool) -> tuple:

@@ -1,0 +1,123 @@
+"""What every fit of one diagnosis shares: the data, the noise floor, the design prior, and the thresholds."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pris_cosim.circuit import Circuit
+from pris_cosim.models import Configuration
+
+from .catalogue import Effect
+from .drift import GROSS_DRIFT
+from .evidence import noise_variance, residuals_white
+from .fit import FitResult, FrequencyFit
+from .prior import DesignPrior
+
+MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
+#: Selection stops once the cost is within this factor of the noise floor.
+NOISE_MARGIN = 1.25
+#: Causes that add circuit elements: named only if they also pass the held-out check (:mod:`.holdout`).
+STRUCTURAL = ("missing-section",)
+#: A section split from the nominal circuit is sought when the fitted baseline's cost is this many times the noise
+#: floor (or a measured resonance is missing from it).
+UNMERGE_ABOVE_FLOOR = 10.0
+#: Evaluations per smoothed stage of every seed of the wide split search (:func:`.unmerge.search_unmerged`, one-port
+#: data that no single cause explains): 8 leaves a split of design values 10 % off hundreds of times above the noise,
+#: 20 brings some seed of most such splits to it.
+WIDE_SEED_NFEV = 20
+#: ... and, with every measured resonance already in the model without it, named only if its fit comes within this
+#: factor of ``NOISE_MARGIN`` times the noise floor.
+STRUCTURAL_FLOOR = 2.0
+
+
+def log(msg: str, progress: bool) -> None:
+    """A progress line on stderr (when ``progress``)."""
+    if progress:
+        print(f"diagnose: {msg}", file=sys.stderr, flush=True)
+
+
+@dataclass
+class Context:
+    """What every fit of one diagnosis shares."""
+
+    f: np.ndarray
+    data: dict[str, np.ndarray]
+    configs: list[Configuration]
+    fixed: tuple[str, ...]
+    scale: float
+    one_port: bool
+    progress: bool
+    nominal: Circuit | None = None
+    floor: float = 0.0
+    #: Noise RMS of each response's log error (:func:`.evidence.noise_floor` ``per_response``).
+    noise: dict[str, float] = field(default_factory=dict)
+    prior: DesignPrior | None = None
+    #: Per-point residual weights by response (:func:`.evidence.noise_weights`); empty: unweighted.
+    weights: dict[str, np.ndarray] = field(default_factory=dict)
+    #: Points quiet enough to show resonances, by response (:func:`.unmerge.resolved_points`); empty: all.
+    resolved: dict[str, np.ndarray] = field(default_factory=dict)
+    #: Every seed of every split fitted (:func:`.unmerge.search_unmerged` ``all_seeds``), for one-port data without
+    #: a cause named; the result does not depend on the baseline, so it is kept.
+    wide_unmerge: bool = False
+    unmerge_cache: dict = field(default_factory=dict)
+
+    def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
+            prior: DesignPrior | None | str = "same", couplings: Sequence[str] = ()) -> FrequencyFit:
+        """The fit of ``circuit`` with ``effects`` (``couplings``: K elements fitted too, see :class:`.fit.FrequencyFit`)."""
+        return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
+                            self.scale, self.prior if isinstance(prior, str) else prior, couplings, self.weights)
+
+    def drift(self, r: FitResult) -> list[dict[str, Any]]:
+        """Values of ``r`` moved beyond the design tolerance (none without a prior)."""
+        if self.prior is None:
+            return []
+        anchored = self.prior.anchored(r.circuit)
+        return self.prior.drift({n: v for n, v in r.values.items() if n.lower() in anchored})
+
+    def gross(self, r: FitResult) -> list[dict[str, Any]]:
+        """The values of ``r`` more than ``GROSS_DRIFT`` tolerances from the design."""
+        return [d for d in self.drift(r) if d["sigmas"] > GROSS_DRIFT]
+
+    def distorted(self, r: FitResult) -> bool:
+        """``r`` moved a value more than ``GROSS_DRIFT`` tolerances from the design (never without a prior)."""
+        return bool(self.gross(r))
+
+    def explained(self, r: FitResult) -> bool:
+        """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
+        return r.objective <= NOISE_MARGIN * self.floor and not self.distorted(r)
+
+    def settled(self, r: FitResult) -> bool:
+        """No further cause is sought after ``r``: it fits to the noise floor (at or below the data's; within
+        ``NOISE_MARGIN`` of :meth:`residual_floor` with white residuals, :func:`.evidence.residuals_white`) without moving
+        any value more than ``GROSS_DRIFT`` tolerances, or it has a new section (which shares the winding's values out
+        anew, so values off the design are its own), fits to the noise floor and, on one-port data, leaves white
+        residuals."""
+        # at or below the data's own floor (an overestimate on a resonant winding) the fit is at the noise anyway;
+        # within the margin above it, only if what is left looks like noise (white along frequency)
+        # (one-port data only, as the residuals' floor: on several responses a few per cent of structure left in a
+        # near-noise fit is the rule, and every extension of a six-response model costs tens of seconds)
+        white = None if not self.one_port or self.weights else residuals_white(r.errors)
+        if r.objective > self.floor and (r.objective > NOISE_MARGIN * self.residual_floor(r) or white is False):
+            return False
+        # a new section with values grossly off the design is at the noise only if what is left looks like noise:
+        # the values moved make up for something else (an effect whose share the drift took)
+        return not self.distorted(r) or (bool(r.structure) and white is not False)
+
+    def residual_floor(self, r: FitResult) -> float:
+        """The noise floor estimated from the third differences of ``r``'s residuals, if below the data's.
+
+        The data's own third differences keep some of a sharp response's
+        curvature (tens of per cent above the noise on a resonant winding);
+        a model that follows the response leaves less of it in its residuals.
+        One-port data without weights only (else the data's floor): measured
+        on several responses, a split that leaves a few per cent of its fit
+        to an effect's form was taken as that effect too.
+        """
+        if self.weights or not self.one_port:
+            return self.floor
+        return min(self.floor, sum(noise_variance(self.f, np.exp(e)) for e in r.errors.values()))

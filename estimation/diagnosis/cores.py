@@ -1,0 +1,188 @@
+"""Independent local fits of one diagnosis shared between this process and a helper process on another core.
+
+A diagnosis spends most of its time in local fits that do not depend on
+each other: the random starts of the baseline (:func:`.baseline.fit_multistart`)
+and the checks of each drifted value (:func:`.drift.relaxed_drift`). On a
+machine with a second core, one helper process (started once per Python
+process, forked from multiprocessing's fork server, one BLAS thread) runs
+part of each such batch while this process runs the rest. The work split
+is fixed by the batch's order, never by timing, and every fit is the same
+deterministic computation in either process: a diagnosis gives the same
+answer with or without the helper.
+
+The helper is not used inside a daemonic process (a Dask worker cannot
+have children), on a machine with one core, or when the environment variable
+``PRIS_DIAGNOSE_JOBS`` is ``1``; it is given up for the rest of the process
+if it cannot be started or dies (the work is then done here).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import importlib
+import multiprocessing
+import os
+import pickle
+import sys
+import types
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any, TypeVar
+
+import numpy as np
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+#: Environment variable: ``1`` runs every fit of a diagnosis in this process.
+JOBS_VARIABLE = "PRIS_DIAGNOSE_JOBS"
+
+_helper: cf.ProcessPoolExecutor | None = None
+_broken = False
+_helper_pid = 0
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def helper_wanted() -> bool:
+    """A helper process may be used: two or more cores, not a daemonic process, not switched off."""
+    if os.environ.get(JOBS_VARIABLE, "").strip() == "1" or _broken:
+        return False
+    if multiprocessing.current_process().daemon or _cores() < 2:
+        return False
+    return "forkserver" in multiprocessing.get_all_start_methods()
+
+
+def _get_helper() -> cf.ProcessPoolExecutor | None:
+    global _helper, _helper_pid
+    if _helper is not None and _helper_pid == os.getpid():
+        return _helper
+    if not helper_wanted():
+        return None
+    try:
+        from .._workers import init_worker
+        from ..executor import _start_forkserver_detached
+
+        with _main_hidden():  # the helper process starts now, without running the caller's script again
+            _start_forkserver_detached()
+            _helper = cf.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("forkserver"),
+                                             initializer=init_worker, initargs=(os.getpid(), True))
+            _helper.submit(_import_fits)
+        _helper_pid = os.getpid()
+    except (OSError, ValueError, RuntimeError, cf.process.BrokenProcessPool):
+        _give_up()
+        return None
+    return _helper
+
+
+@contextlib.contextmanager
+def _main_hidden() -> Iterator[None]:
+    """An empty ``__main__`` while a process is started.
+
+    A process started by the fork server or by spawning imports the parent's
+    main script again (as ``__mp_main__``) unless its top level is guarded
+    by ``if __name__ == "__main__"``. The helper only runs functions of this
+    package, so it is given no main script: a user's unguarded script is not
+    run twice.
+    """
+    saved = sys.modules.get("__main__")
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        yield
+    finally:
+        if saved is not None:
+            sys.modules["__main__"] = saved
+
+
+def _import_fits() -> bool:
+    """Import the modules whose functions the batches of a diagnosis run (done once, while this process fits)."""
+    importlib.import_module(f"{__package__}.diagnose")
+    return True
+
+
+def helper_available() -> bool:
+    """A helper process runs (started now if wanted and not yet running)."""
+    return _get_helper() is not None
+
+
+def warm_up() -> None:
+    """Start the helper (if wanted; it imports the fitting modules in the background)."""
+    _get_helper()
+
+
+def _give_up() -> None:
+    global _helper, _broken
+    _broken = True  # for the rest of this process: the work is done here
+    if _helper is not None:
+        _helper.shutdown(wait=False, cancel_futures=True)
+    _helper = None
+
+
+def _run_all(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
+    return [fn(item) for item in items]
+
+
+def _run_pickled(payload: bytes) -> list[Any]:
+    """:func:`_run_all` of a pickled ``(fn, items)`` (the helper's side of :class:`SharedBatch`)."""
+    fn, items = pickle.loads(payload)
+    return _run_all(fn, items)
+
+
+class SharedBatch:
+    """``[fn(item) for item in items]``: the items after the first ``here`` handed to the helper process at once,
+    the first ``here`` run in this process when :meth:`result` is called.
+
+    Between the two this process may do other work. ``fn`` must be a
+    module-level function and ``items`` picklable. Without a helper (or when
+    it fails), every item is run here.
+    """
+
+    def __init__(self, fn: Callable[[T], R], items: Sequence[T], here: int | None = None) -> None:
+        self.fn, self.items = fn, list(items)
+        self.here = len(self.items) if len(self.items) < 2 else (len(self.items) + 1) // 2 if here is None else here
+        self.here = min(max(self.here, 0), len(self.items))
+        self.future = None
+        helper = _get_helper() if self.here < len(self.items) else None
+        if helper is not None:
+            try:
+                # pickled now: the pool pickles in a background thread, and this process goes on changing the
+                # objects (a fit's smoothing during a continuation)
+                self.future = helper.submit(_run_pickled, pickle.dumps((fn, self.items[self.here:]),
+                                                                       protocol=pickle.HIGHEST_PROTOCOL))
+            except (RuntimeError, cf.process.BrokenProcessPool):
+                _give_up()
+        if self.future is None:
+            self.here = len(self.items)
+
+    def result(self) -> list[R]:
+        """Every item's result, in the order of the items."""
+        first = _run_all(self.fn, self.items[: self.here])
+        if self.future is None:
+            return first
+        try:
+            second = self.future.result()
+        except cf.process.BrokenProcessPool:
+            _give_up()
+            second = _run_all(self.fn, self.items[self.here:])
+        return first + second
+
+
+def shared_map(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
+    """``[fn(item) for item in items]``, the second half run by the helper process while this one runs the first.
+
+    ``fn`` must be a module-level function and ``items`` picklable; results
+    come back in the order of ``items`` (:class:`SharedBatch`).
+    """
+    return SharedBatch(fn, items).result()
+
+
+def starts_fitted(args: tuple[Any, Any, dict[str, Any]]) -> tuple[Any, float, int]:
+    """One local fit from one start row: ``(fit, x0, options)`` to ``(x, cost, nfev)`` (for :func:`shared_map`)."""
+    fit, x0, options = args
+    r = fit.fit(x0s=x0[None], grid=False, keep_starts=1, **options)
+    return r.x, float(np.sum(fit.residuals(r.x) ** 2)), int(r.nfev)
