@@ -1,19 +1,25 @@
 """Independent local fits of one diagnosis shared between this process and a helper process on another core.
 
-A diagnosis spends most of its time in local fits that do not depend on
-each other: the random starts of the baseline (:func:`.baseline.fit_multistart`)
-and the checks of each drifted value (:func:`.drift.relaxed_drift`). On a
-machine with a second core, one helper process (started once per Python
-process, forked from multiprocessing's fork server, one BLAS thread) runs
-part of each such batch while this process runs the rest. The work split
-is fixed by the batch's order, never by timing, and every fit is the same
-deterministic computation in either process: a diagnosis gives the same
+A diagnosis spends most of its time in batches of local fits that do not
+depend on each other: the random starts of the baseline
+(:func:`.baseline.fit_multistart`), the forms of each cause, the candidate
+sections and seeds of a missing section, the baseline refitted from each
+candidate's values, and the check of each drifted value
+(:func:`.drift.relaxed_drift`). On a machine with a second core, one helper
+process (started once per Python process from multiprocessing's fork
+server, one BLAS thread) runs the tail of each batch while this process
+runs its head (:class:`SharedBatch`). The split is fixed by the batch's
+order, never by timing; the helper's share is pickled when it is handed
+over, so it sees the objects as they were then; and every fit is the same
+deterministic computation in either process. A diagnosis gives the same
 answer with or without the helper.
 
 The helper is not used inside a daemonic process (a Dask worker cannot
-have children), on a machine with one core, or when the environment variable
-``PRIS_DIAGNOSE_JOBS`` is ``1``; it is given up for the rest of the process
-if it cannot be started or dies (the work is then done here).
+have children), on a machine with one core, or when the environment
+variable ``PRIS_DIAGNOSE_JOBS`` is ``1``; it is given up for the rest of the
+process if it cannot be started or dies (the work is then done here). It
+is started without the caller's main script (:func:`_main_hidden`), so a
+script without an ``if __name__ == "__main__"`` guard is not run twice.
 """
 
 from __future__ import annotations
@@ -34,7 +40,7 @@ import numpy as np
 T = TypeVar("T")
 R = TypeVar("R")
 
-#: Environment variable: ``1`` runs every fit of a diagnosis in this process.
+#: Environment variable: ``1`` (or ``0``) runs every fit of a diagnosis in this process.
 JOBS_VARIABLE = "PRIS_DIAGNOSE_JOBS"
 
 _helper: cf.ProcessPoolExecutor | None = None
@@ -51,7 +57,7 @@ def _cores() -> int:
 
 def helper_wanted() -> bool:
     """A helper process may be used: two or more cores, not a daemonic process, not switched off."""
-    if os.environ.get(JOBS_VARIABLE, "").strip() == "1" or _broken:
+    if os.environ.get(JOBS_VARIABLE, "").strip() in ("0", "1") or _broken:
         return False
     if multiprocessing.current_process().daemon or _cores() < 2:
         return False
@@ -60,10 +66,10 @@ def helper_wanted() -> bool:
 
 def _get_helper() -> cf.ProcessPoolExecutor | None:
     global _helper, _helper_pid
-    if _helper is not None and _helper_pid == os.getpid():
-        return _helper
     if not helper_wanted():
         return None
+    if _helper is not None and _helper_pid == os.getpid():
+        return _helper
     try:
         from .._workers import init_worker
         from ..executor import _start_forkserver_detached
