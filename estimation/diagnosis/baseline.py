@@ -86,15 +86,15 @@ PRELAUNCH_ABOVE = 4.0
 
 class _StartsFitted:
     """The short local fits from the random starts (and the aligned start), screened in one batch and fitted in
-    that order; the tail of that order run by the helper process from creation on (:class:`.cores.SharedBatch`)."""
+    that order; the helper process begins on them at creation (:class:`.cores.SharedBatch`)."""
 
-    def __init__(self, fit: FrequencyFit, X: np.ndarray, max_nfev: int, here: int | None) -> None:
+    def __init__(self, fit: FrequencyFit, X: np.ndarray, max_nfev: int) -> None:
         self.t0 = time.perf_counter()
         lo, hi = fit.bounds()
         self.fit, self.X = fit, np.clip(np.atleast_2d(np.asarray(X, float)), lo + 1e-9, hi - 1e-9)
         r = fit.residuals_batch(self.X)
         order = np.argsort(np.sum(r * r, axis=1))
-        self.batch = SharedBatch(starts_fitted, [(fit, self.X[i], {"max_nfev": max_nfev}) for i in order], here)
+        self.batch = SharedBatch(starts_fitted, [(fit, self.X[i], {"max_nfev": max_nfev}) for i in order])
 
     def result(self) -> FitResult:
         """The best fit; of equal costs the first in the screened order (as :meth:`.fit.FrequencyFit.fit`)."""
@@ -113,5 +113,4 @@ def _random_starts(fit: FrequencyFit, x0: np.ndarray, starts: int, spread: float
     aligned = aligned_start(fit, x0)
     if aligned is not None:
         X = np.vstack([aligned[None], X])
-    # this process runs the fit from the given values too: it takes fewer of the short fits
-    return _StartsFitted(fit, X, max(10, max_nfev // 2), here=max(1, (X.shape[0] - 3) // 2))
+    return _StartsFitted(fit, X, max(10, max_nfev // 2))

@@ -7,12 +7,12 @@ sections and seeds of a missing section, the baseline refitted from each
 candidate's values, and the check of each drifted value
 (:func:`.drift.relaxed_drift`). On a machine with a second core, one helper
 process (started once per Python process from multiprocessing's fork
-server, one BLAS thread) runs the tail of each batch while this process
-runs its head (:class:`SharedBatch`). The split is fixed by the batch's
-order, never by timing; the helper's share is pickled when it is handed
-over, so it sees the objects as they were then; and every fit is the same
-deterministic computation in either process. A diagnosis gives the same
-answer with or without the helper.
+server, one BLAS thread) takes the items of each batch from its end while
+this process takes them from its start (:class:`SharedBatch`). The items
+are pickled when they are handed over, so the helper sees the objects as
+they were then, and every fit is the same deterministic computation in
+either process: which process runs an item depends on timing, its result
+does not. A diagnosis gives the same answer with or without the helper.
 
 The helper is not used inside a daemonic process (a Dask worker cannot
 have children), on a machine with one core, or when the environment
@@ -129,60 +129,70 @@ def _give_up() -> None:
     _helper = None
 
 
-def _run_all(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
-    return [fn(item) for item in items]
-
-
-def _run_pickled(payload: bytes) -> list[Any]:
-    """:func:`_run_all` of a pickled ``(fn, items)`` (the helper's side of :class:`SharedBatch`)."""
-    fn, items = pickle.loads(payload)
-    return _run_all(fn, items)
+def _run_pickled(payload: bytes) -> Any:
+    """``fn(item)`` of a pickled ``(fn, item)`` (the helper's side of :class:`SharedBatch`)."""
+    fn, item = pickle.loads(payload)
+    return fn(item)
 
 
 class SharedBatch:
-    """``[fn(item) for item in items]``: the items after the first ``here`` handed to the helper process at once,
-    the first ``here`` run in this process when :meth:`result` is called.
+    """``[fn(item) for item in items]`` shared with the helper process: it takes items from the end of the list,
+    this process from the start, until they meet.
 
-    Between the two this process may do other work. ``fn`` must be a
+    Every item but the first is handed to the helper at once, pickled then
+    (a snapshot: this process may go on changing the objects, a fit's
+    smoothing during a continuation, before :meth:`result`). :meth:`result`
+    runs the items from the start here, taking back each one the helper has
+    not begun, and collects the helper's results from where they met. Which
+    process runs an item depends on timing; its result does not (the same
+    deterministic computation on the same values). ``fn`` must be a
     module-level function and ``items`` picklable. Without a helper (or when
     it fails), every item is run here.
     """
 
-    def __init__(self, fn: Callable[[T], R], items: Sequence[T], here: int | None = None) -> None:
+    def __init__(self, fn: Callable[[T], R], items: Sequence[T]) -> None:
         self.fn, self.items = fn, list(items)
-        self.here = len(self.items) if len(self.items) < 2 else (len(self.items) + 1) // 2 if here is None else here
-        self.here = min(max(self.here, 0), len(self.items))
-        self.future = None
-        helper = _get_helper() if self.here < len(self.items) else None
-        if helper is not None:
-            try:
-                # pickled now: the pool pickles in a background thread, and this process goes on changing the
-                # objects (a fit's smoothing during a continuation)
-                self.future = helper.submit(_run_pickled, pickle.dumps((fn, self.items[self.here:]),
-                                                                       protocol=pickle.HIGHEST_PROTOCOL))
-            except (RuntimeError, cf.process.BrokenProcessPool):
-                _give_up()
-        if self.future is None:
-            self.here = len(self.items)
+        self.futures: dict[int, cf.Future] = {}
+        helper = _get_helper() if len(self.items) > 1 else None
+        if helper is None:
+            return
+        try:
+            for i in range(len(self.items) - 1, 0, -1):  # the helper begins at the end
+                payload = pickle.dumps((fn, self.items[i]), protocol=pickle.HIGHEST_PROTOCOL)
+                self.futures[i] = helper.submit(_run_pickled, payload)
+        except (RuntimeError, cf.process.BrokenProcessPool, pickle.PicklingError):
+            self._cancel_all()
+            _give_up()
+
+    def _cancel_all(self) -> None:
+        for future in self.futures.values():
+            future.cancel()
+        self.futures = {}
 
     def result(self) -> list[R]:
         """Every item's result, in the order of the items."""
-        first = _run_all(self.fn, self.items[: self.here])
-        if self.future is None:
-            return first
-        try:
-            second = self.future.result()
-        except cf.process.BrokenProcessPool:
-            _give_up()
-            second = _run_all(self.fn, self.items[self.here:])
-        return first + second
+        out: list[Any] = [None] * len(self.items)
+        i = 0
+        while i < len(self.items) and (i not in self.futures or self.futures[i].cancel()):
+            out[i] = self.fn(self.items[i])  # not begun by the helper: run here
+            i += 1
+        for j in range(i, len(self.items)):
+            try:
+                out[j] = self.futures[j].result()
+            except cf.process.BrokenProcessPool:
+                self._cancel_all()
+                _give_up()
+                out[j:] = [self.fn(item) for item in self.items[j:]]
+                break
+        return out
 
 
 def shared_map(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
-    """``[fn(item) for item in items]``, the second half run by the helper process while this one runs the first.
+    """``[fn(item) for item in items]``, shared with the helper process.
 
     ``fn`` must be a module-level function and ``items`` picklable; results
-    come back in the order of ``items`` (:class:`SharedBatch`).
+    come back in the order of ``items``; the helper runs items from the end
+    while this process runs them from the start (:class:`SharedBatch`).
     """
     return SharedBatch(fn, items).result()
 
