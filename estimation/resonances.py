@@ -16,7 +16,6 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.signal import find_peaks, savgol_filter
 
 
 @dataclass(frozen=True)
@@ -51,6 +50,8 @@ def _smoothed_db(frequency_hz: np.ndarray, values: np.ndarray, smooth_decades: f
     window = int(round(smooth_decades * per_decade)) | 1
     if window < 5:
         return db
+    from scipy.signal import savgol_filter  # here: scipy.signal takes most of a diagnosis's import time
+
     return savgol_filter(db, min(window, (db.size - 2) | 1), polyorder=3)
 
 
@@ -93,6 +94,8 @@ def find_resonances(
     f, h = f[band], h[band]
     if f.size < 3:
         return []
+    from scipy.signal import find_peaks
+
     db = _smoothed_db(f, h, smooth_decades)
     out: list[Resonance] = []
     for kind, sign in (("parallel", 1.0), ("series", -1.0)):

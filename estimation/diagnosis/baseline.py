@@ -66,11 +66,11 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     if starts > 0 and helper_available() and float(np.sum(fit.residuals(x0) ** 2)) > PRELAUNCH_ABOVE * good_enough:
         # far from good enough: the random starts' short fits are handed to the helper process (:mod:`.cores`)
         # before the fit from the given values runs here (the result does not depend on the order)
-        batch = _random_starts(fit, x0, starts, spread, max_nfev)
+        batch = _StartsFitted(fit, x0, starts, spread, max_nfev)
     first = fit.fit_continued(x0, max_nfev=max_nfev)
     if first.objective <= good_enough or starts <= 0:
         return first
-    short = (batch or _random_starts(fit, x0, starts, spread, max_nfev)).result()
+    short = (batch or _StartsFitted(fit, x0, starts, spread, max_nfev)).result()
     if short.objective >= first.objective:
         return first
     best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)
@@ -85,32 +85,40 @@ PRELAUNCH_ABOVE = 4.0
 
 
 class _StartsFitted:
-    """The short local fits from the random starts (and the aligned start), screened in one batch and fitted in
-    that order; the helper process begins on them at creation (:class:`.cores.SharedBatch`)."""
+    """The short local fits from the random starts and the aligned start (:mod:`.align`), in the order of their
+    screened costs, as :meth:`.fit.FrequencyFit.fit` with every start kept.
 
-    def __init__(self, fit: FrequencyFit, X: np.ndarray, max_nfev: int) -> None:
+    The random starts are handed to the helper process first
+    (:class:`.cores.SharedBatch`); the aligned start, which takes a
+    resonance search to find, is found and fitted here meanwhile.
+    """
+
+    def __init__(self, fit: FrequencyFit, x0: np.ndarray, starts: int, spread: float, max_nfev: int) -> None:
         self.t0 = time.perf_counter()
+        rng = np.random.default_rng(20260101)
         lo, hi = fit.bounds()
-        self.fit, self.X = fit, np.clip(np.atleast_2d(np.asarray(X, float)), lo + 1e-9, hi - 1e-9)
-        r = fit.residuals_batch(self.X)
-        order = np.argsort(np.sum(r * r, axis=1))
-        self.batch = SharedBatch(starts_fitted, [(fit, self.X[i], {"max_nfev": max_nfev}) for i in order])
+        self.fit, self.options = fit, {"max_nfev": max(10, max_nfev // 2)}
+        X = np.clip(x0 + spread * rng.standard_normal((starts, x0.size)), lo + 1e-9, hi - 1e-9)
+        r = fit.residuals_batch(X)
+        self.screened = np.sum(r * r, axis=1)
+        self.order = np.argsort(self.screened)
+        self.batch = SharedBatch(starts_fitted, [(fit, X[i], self.options) for i in self.order])
+        # and from the given values with the model's resonances moved onto the measured ones
+        aligned = aligned_start(fit, x0)
+        self.aligned = None if aligned is None else np.clip(aligned, lo + 1e-9, hi - 1e-9)
 
     def result(self) -> FitResult:
-        """The best fit; of equal costs the first in the screened order (as :meth:`.fit.FrequencyFit.fit`)."""
-        fitted = self.batch.result()
-        best = min(range(len(fitted)), key=lambda i: (fitted[i][1], i))
-        return self.fit.result(fitted[best][0], None, self.X.shape[0] + sum(n for _, _, n in fitted),
+        """The best fit; of equal costs the first in the screened order."""
+        fitted: dict[int, tuple] = {}  # by row of the starts (the aligned start first, as row 0)
+        screened = self.screened
+        if self.aligned is not None:
+            fitted[0] = starts_fitted((self.fit, self.aligned, self.options))
+            r = self.fit.residuals_batch(self.aligned[None])
+            screened = np.concatenate([np.sum(r * r, axis=1), screened])
+        shift = 0 if self.aligned is None else 1
+        for i, res in zip(self.order, self.batch.result()):
+            fitted[int(i) + shift] = res
+        rank = {int(row): k for k, row in enumerate(np.argsort(screened))}
+        best = min(fitted, key=lambda row: (fitted[row][1], rank[row]))
+        return self.fit.result(fitted[best][0], None, len(fitted) + sum(n for _, _, n in fitted.values()),
                                time.perf_counter() - self.t0)
-
-
-def _random_starts(fit: FrequencyFit, x0: np.ndarray, starts: int, spread: float, max_nfev: int) -> _StartsFitted:
-    """The random starts around ``x0`` (fixed seed) and the aligned start (:mod:`.align`), their fits begun."""
-    rng = np.random.default_rng(20260101)
-    lo, hi = fit.bounds()
-    X = np.clip(x0 + spread * rng.standard_normal((starts, x0.size)), lo + 1e-9, hi - 1e-9)
-    # and from the given values with the model's resonances moved onto the measured ones (:mod:`.align`)
-    aligned = aligned_start(fit, x0)
-    if aligned is not None:
-        X = np.vstack([aligned[None], X])
-    return _StartsFitted(fit, X, max(10, max_nfev // 2))

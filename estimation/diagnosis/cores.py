@@ -24,12 +24,12 @@ script without an ``if __name__ == "__main__"`` guard is not run twice.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import contextlib
 import importlib
 import multiprocessing
 import os
 import pickle
+import signal
 import sys
 import types
 from collections.abc import Callable, Iterator, Sequence
@@ -42,10 +42,67 @@ R = TypeVar("R")
 
 #: Environment variable: ``1`` (or ``0``) runs every fit of a diagnosis in this process.
 JOBS_VARIABLE = "PRIS_DIAGNOSE_JOBS"
+#: Seconds between checks that the helper is still alive while its results are awaited.
+POLL_S = 0.5
 
-_helper: cf.ProcessPoolExecutor | None = None
+
+class _Helper:
+    """The helper process, its pipe, and the claim bounds ``[low, high)`` of the batch in hand (shared, locked)."""
+
+    def __init__(self) -> None:
+        from ..executor import _start_forkserver_detached
+
+        ctx = multiprocessing.get_context("forkserver")
+        self.lock = ctx.Lock()
+        self.bounds = ctx.Array("q", 2, lock=False)
+        self.conn, child = ctx.Pipe()
+        self.batch = 0
+        self.busy = False
+        with _main_hidden():  # the helper starts now, without running the caller's script again
+            _start_forkserver_detached()
+            self.proc = ctx.Process(target=_helper_loop, args=(child, self.lock, self.bounds, os.getpid()),
+                                    name="pris-diagnose-helper", daemon=True)
+            self.proc.start()
+        child.close()
+        self.pid = os.getpid()
+
+    def claim_low(self) -> int:
+        """The next item from the start, or -1 when the two ends have met."""
+        with self.lock:
+            if self.bounds[0] < self.bounds[1]:
+                self.bounds[0] += 1
+                return int(self.bounds[0] - 1)
+        return -1
+
+    def receive(self) -> tuple:
+        """The helper's next message; raises ``EOFError`` once it has died."""
+        while not self.conn.poll(POLL_S):
+            if not self.proc.is_alive():
+                raise EOFError("the helper process died")
+        return self.conn.recv()
+
+    def settle(self) -> None:
+        """Wait until the helper has finished the batch in hand (its end message read); raises ``EOFError`` if it
+        died."""
+        while self.busy:
+            batch, i, _, _ = self.receive()
+            if batch == self.batch and i < 0:
+                self.busy = False
+
+    def stop(self) -> None:
+        """No more claims in the batch in hand (the helper finishes the item it runs)."""
+        with self.lock:
+            self.bounds[1] = self.bounds[0]
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self.conn.close()
+        with contextlib.suppress(Exception):
+            self.proc.kill()
+
+
+_helper: _Helper | None = None
 _broken = False
-_helper_pid = 0
 
 
 def _cores() -> int:
@@ -64,23 +121,15 @@ def helper_wanted() -> bool:
     return "forkserver" in multiprocessing.get_all_start_methods()
 
 
-def _get_helper() -> cf.ProcessPoolExecutor | None:
-    global _helper, _helper_pid
+def _get_helper() -> _Helper | None:
+    global _helper
     if not helper_wanted():
         return None
-    if _helper is not None and _helper_pid == os.getpid():
+    if _helper is not None and _helper.pid == os.getpid() and _helper.proc.is_alive():
         return _helper
     try:
-        from .._workers import init_worker
-        from ..executor import _start_forkserver_detached
-
-        with _main_hidden():  # the helper process starts now, without running the caller's script again
-            _start_forkserver_detached()
-            _helper = cf.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("forkserver"),
-                                             initializer=init_worker, initargs=(os.getpid(), True))
-            _helper.submit(_import_fits)
-        _helper_pid = os.getpid()
-    except (OSError, ValueError, RuntimeError, cf.process.BrokenProcessPool):
+        _helper = _Helper()
+    except (OSError, ValueError, RuntimeError):
         _give_up()
         return None
     return _helper
@@ -105,10 +154,40 @@ def _main_hidden() -> Iterator[None]:
             sys.modules["__main__"] = saved
 
 
-def _import_fits() -> bool:
-    """Import the modules whose functions the batches of a diagnosis run (done once, while this process fits)."""
-    importlib.import_module(f"{__package__}.diagnose")
-    return True
+def _helper_loop(conn: Any, lock: Any, bounds: Any, parent: int) -> None:
+    """The helper's life: for each batch received, claim items from the end, run them, send each result back.
+
+    Every batch ends with a ``(batch, -1, True, None)`` message, sent once
+    the two ends have met. An item that raises (or whose result does not
+    pickle) is sent back as not done: this process then runs it itself.
+    """
+    from .._threads import single_threaded_blas
+    from .._workers import watch_parent
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle
+    watch_parent(parent)
+    single_threaded_blas()
+    importlib.import_module(f"{__package__}.diagnose")  # what the batches' functions need, before the first
+    while True:
+        try:
+            batch, payload = conn.recv()
+        except (EOFError, OSError):
+            return
+        try:
+            fn, items = pickle.loads(payload)
+        except Exception:  # noqa: BLE001  (nothing claimed: this process runs every item)
+            fn, items = None, []
+        while fn is not None:
+            with lock:
+                if bounds[1] <= bounds[0]:
+                    break
+                bounds[1] -= 1
+                i = int(bounds[1])
+            try:
+                conn.send((batch, i, True, fn(items[i])))
+            except Exception:  # noqa: BLE001  (run again where the batch came from, which raises it there)
+                conn.send((batch, i, False, None))
+        conn.send((batch, -1, True, None))
 
 
 def helper_available() -> bool:
@@ -125,65 +204,79 @@ def _give_up() -> None:
     global _helper, _broken
     _broken = True  # for the rest of this process: the work is done here
     if _helper is not None:
-        _helper.shutdown(wait=False, cancel_futures=True)
+        _helper.close()
     _helper = None
-
-
-def _run_pickled(payload: bytes) -> Any:
-    """``fn(item)`` of a pickled ``(fn, item)`` (the helper's side of :class:`SharedBatch`)."""
-    fn, item = pickle.loads(payload)
-    return fn(item)
 
 
 class SharedBatch:
     """``[fn(item) for item in items]`` shared with the helper process: it takes items from the end of the list,
-    this process from the start, until they meet.
+    this process from the start, one at a time, until they meet.
 
-    Every item but the first is handed to the helper at once, pickled then
-    (a snapshot: this process may go on changing the objects, a fit's
-    smoothing during a continuation, before :meth:`result`). :meth:`result`
-    runs the items from the start here, taking back each one the helper has
-    not begun, and collects the helper's results from where they met. Which
-    process runs an item depends on timing; its result does not (the same
-    deterministic computation on the same values). ``fn`` must be a
-    module-level function and ``items`` picklable. Without a helper (or when
-    it fails), every item is run here.
+    The batch is handed to the helper at once, pickled then (a snapshot:
+    this process may go on changing the objects, a fit's smoothing during a
+    continuation, before :meth:`result`). :meth:`result` runs items from the
+    start here and then collects the helper's. Which process runs an item
+    depends on timing; its result does not (the same deterministic
+    computation on the same values). ``fn`` must be a module-level function
+    and ``items`` picklable. Without a helper (none wanted, or a failure),
+    every item is run here. One batch at a time: a batch is created after
+    the previous one's :meth:`result`.
     """
 
     def __init__(self, fn: Callable[[T], R], items: Sequence[T]) -> None:
         self.fn, self.items = fn, list(items)
-        self.futures: dict[int, cf.Future] = {}
+        self.helper: _Helper | None = None
         helper = _get_helper() if len(self.items) > 1 else None
         if helper is None:
             return
         try:
-            for i in range(len(self.items) - 1, 0, -1):  # the helper begins at the end
-                payload = pickle.dumps((fn, self.items[i]), protocol=pickle.HIGHEST_PROTOCOL)
-                self.futures[i] = helper.submit(_run_pickled, payload)
-        except (RuntimeError, cf.process.BrokenProcessPool, pickle.PicklingError):
-            self._cancel_all()
+            helper.settle()  # a batch left unfinished by an error here: its end message first
+            payload = pickle.dumps((fn, self.items), protocol=pickle.HIGHEST_PROTOCOL)
+            helper.batch += 1
+            with helper.lock:
+                helper.bounds[0], helper.bounds[1] = 0, len(self.items)
+            helper.conn.send((helper.batch, payload))
+        except (pickle.PicklingError, AttributeError, TypeError):  # not picklable: run here
+            return
+        except (OSError, EOFError):
             _give_up()
+            return
+        helper.busy, self.helper = True, helper
 
-    def _cancel_all(self) -> None:
-        for future in self.futures.values():
-            future.cancel()
-        self.futures = {}
+    @property
+    def shared(self) -> bool:
+        """The helper has this batch."""
+        return self.helper is not None
 
     def result(self) -> list[R]:
         """Every item's result, in the order of the items."""
-        out: list[Any] = [None] * len(self.items)
-        i = 0
-        while i < len(self.items) and (i not in self.futures or self.futures[i].cancel()):
-            out[i] = self.fn(self.items[i])  # not begun by the helper: run here
-            i += 1
-        for j in range(i, len(self.items)):
-            try:
-                out[j] = self.futures[j].result()
-            except cf.process.BrokenProcessPool:
-                self._cancel_all()
-                _give_up()
-                out[j:] = [self.fn(item) for item in self.items[j:]]
-                break
+        n = len(self.items)
+        out: list[Any] = [None] * n
+        done = [False] * n
+        helper, self.helper = self.helper, None
+        if helper is None:
+            return [self.fn(item) for item in self.items]
+        try:
+            while (i := helper.claim_low()) >= 0:
+                out[i], done[i] = self.fn(self.items[i]), True
+            while True:
+                batch, i, ok, value = helper.receive()
+                if batch != helper.batch:
+                    continue
+                if i < 0:
+                    break
+                if ok:
+                    out[i], done[i] = value, True
+            helper.busy = False
+        except (EOFError, OSError):
+            _give_up()
+        except BaseException:  # an error (or Ctrl-C) here: the helper stops claiming, its end message read later
+            helper.stop()
+            raise
+        # items the helper could not finish (it died, or the item raised there): run here
+        for i in range(n):
+            if not done[i]:
+                out[i] = self.fn(self.items[i])
         return out
 
 
