@@ -94,7 +94,7 @@ from pris_cosim.netlist import parse_netlist
 case = hc.one_port_case(("skin-effect",), 7, sections=5)
 d = diagnose_frequency(case.frequency_hz, case.measured, circuit=parse_netlist(case.baseline_netlist), port="n1",
                        progress=False)
-final = d.extended or d.baseline
+final = d.best or d.baseline
 print(json.dumps({{"causes": d.causes, "cost": final.cost, "baseline": d.baseline.cost,
                   "values": final.values, "drift": [x["name"] for x in d.drift]}}))
 """
