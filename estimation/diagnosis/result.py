@@ -11,22 +11,39 @@ from .fit import FitResult
 
 
 @dataclass
-class Diagnosis:
-    """Result of a diagnosis (see :meth:`as_json` for the command-line keys)."""
+class DiagnosisOutcome:
+    """What every diagnosis answers, from frequency responses (:class:`Diagnosis`) or waveforms
+    (:class:`.waveform.WaveformDiagnosis`): one contract for the command's JSON keys.
+
+    ``cause`` is the first cause named (``"none"``), ``causes`` all of them
+    in the order named, ``steps`` the forward selection's steps, ``fits``
+    every candidate's fit, ``best`` the fit with every named cause (None
+    for ``none``), ``noise`` the noise floor, ``unexplained`` the bands the
+    final model leaves above it, ``wall_s`` seconds.
+    """
 
     cause: str
+    baseline: Any
+    best: Any | None
+    fits: list[Any]
+    evidence: dict[str, Any] = field(default_factory=dict, kw_only=True)
+    wall_s: float = field(default=0.0, kw_only=True)
+    causes: list[str] = field(default_factory=list, kw_only=True)
+    steps: list[dict[str, Any]] = field(default_factory=list, kw_only=True)
+    noise: dict[str, Any] = field(default_factory=dict, kw_only=True)
+    unexplained: list[dict[str, Any]] = field(default_factory=list, kw_only=True)
+
+
+@dataclass
+class Diagnosis(DiagnosisOutcome):
+    """Result of a frequency-response diagnosis (see :meth:`as_json` for the command-line keys)."""
+
     baseline: FitResult
     best: FitResult | None
     fits: list[FitResult]
     frequency_hz: np.ndarray
     measured: dict[str, np.ndarray]
-    evidence: dict[str, Any] = field(default_factory=dict)
     realisation: dict[str, Any] = field(default_factory=dict)
-    wall_s: float = 0.0
-    causes: list[str] = field(default_factory=list)
-    steps: list[dict[str, Any]] = field(default_factory=list)
-    noise: dict[str, Any] = field(default_factory=dict)
-    unexplained: list[dict[str, Any]] = field(default_factory=list)
     failed: list[dict[str, Any]] = field(default_factory=list)
     drift: list[dict[str, Any]] = field(default_factory=list)
     baseline_drift: list[dict[str, Any]] = field(default_factory=list)

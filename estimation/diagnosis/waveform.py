@@ -76,6 +76,7 @@ from pris_cosim.mna import MNA, StateSpace
 from pris_cosim.timedomain import simulate_pwc
 
 from .fit import DiagnosisError, bic, significant
+from .result import DiagnosisOutcome
 from .waveform_signals import (NOISE_LP_ORDER, SIGNALS, UNITS, _bit_samples, _decimation, _edges, _line_share, _localise,  # noqa: F401
                                _residual_spectrum, _since_edge, _spectral_peaks, _switch_times, waveform_noise)
 
@@ -610,10 +611,9 @@ class _Problem:
 
 
 @dataclass
-class WaveformDiagnosis:
+class WaveformDiagnosis(DiagnosisOutcome):
     """Result of a waveform diagnosis (see :meth:`as_json` for the command-line keys)."""
 
-    cause: str
     baseline: WaveformFit
     best: WaveformFit | None
     fits: list[WaveformFit]
@@ -621,12 +621,6 @@ class WaveformDiagnosis:
     v_bprbs: np.ndarray
     measured: dict[str, np.ndarray]
     nominal: dict[str, float]
-    evidence: dict[str, Any] = field(default_factory=dict)
-    wall_s: float = 0.0
-    causes: list[str] = field(default_factory=list)
-    steps: list[dict[str, Any]] = field(default_factory=list)
-    noise: dict[str, Any] = field(default_factory=dict)
-    unexplained: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def gain(self) -> float:
