@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import multiprocessing
 import subprocess
@@ -41,6 +42,13 @@ def test_the_helper_sees_the_items_as_they_were_when_handed_over():
     out = batch.result()
     assert out[-1] == 3.0  # the helper's first, on the values handed over (the others: on either)
     assert all(v in (3.0, 33.0) for v in out)
+
+
+@needs_helper
+def test_a_batch_within_an_item_runs_where_the_item_runs():
+    nested = functools.partial(cores.shared_map, abs)
+    assert cores.shared_map(nested, [[-1, -2], [-3, -4], [-5], [-6, -7, -8]]) == [[1, 2], [3, 4], [5], [6, 7, 8]]
+    assert cores.shared_map(abs, [-1, -2, -3]) == [1, 2, 3]  # and the helper is free again
 
 
 def test_switched_off_by_the_environment(monkeypatch):

@@ -57,7 +57,8 @@ class _Helper:
         self.bounds = ctx.Array("q", 2, lock=False)
         self.conn, child = ctx.Pipe()
         self.batch = 0
-        self.busy = False
+        self.busy = False  # the helper has a batch whose end message this process has not read
+        self.active = False  # a batch's result is being collected: a batch begun meanwhile runs here
         with _main_hidden():  # the helper starts now, without running the caller's script again
             _start_forkserver_detached()
             self.proc = ctx.Process(target=_helper_loop, args=(child, self.lock, self.bounds, os.getpid()),
@@ -219,15 +220,15 @@ class SharedBatch:
     depends on timing; its result does not (the same deterministic
     computation on the same values). ``fn`` must be a module-level function
     and ``items`` picklable. Without a helper (none wanted, or a failure),
-    every item is run here. One batch at a time: a batch is created after
-    the previous one's :meth:`result`.
+    every item is run here. One batch at a time: a batch begun while
+    another is handed over (within one of its items, say) runs here.
     """
 
     def __init__(self, fn: Callable[[T], R], items: Sequence[T]) -> None:
         self.fn, self.items = fn, list(items)
         self.helper: _Helper | None = None
         helper = _get_helper() if len(self.items) > 1 else None
-        if helper is None:
+        if helper is None or helper.active:  # a batch within an item of another (run here): this one runs here
             return
         try:
             helper.settle()  # a batch left unfinished by an error here: its end message first
@@ -241,7 +242,7 @@ class SharedBatch:
         except (OSError, EOFError):
             _give_up()
             return
-        helper.busy, self.helper = True, helper
+        helper.busy, helper.active, self.helper = True, True, helper
 
     @property
     def shared(self) -> bool:
@@ -273,6 +274,8 @@ class SharedBatch:
         except BaseException:  # an error (or Ctrl-C) here: the helper stops claiming, its end message read later
             helper.stop()
             raise
+        finally:
+            helper.active = False
         # items the helper could not finish (it died, or the item raised there): run here
         for i in range(n):
             if not done[i]:

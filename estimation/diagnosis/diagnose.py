@@ -484,15 +484,24 @@ def _extensions(ctx: Context, current: FitResult, causes: Sequence[str], results
                 variants_tried: dict[str, list[Effect]]) -> dict[str, FitResult]:
     """Each of ``causes`` fitted together with ``current`` (:func:`_extend`): the fits that lower the objective."""
     pool = {}
-    for cause in causes:
-        t = time.perf_counter()
-        res = _extend(ctx, current, cause, results[cause], variants_tried.get(cause, []))
+    # independent fits, shared with the helper process (:mod:`.cores`; the batches within each run where it runs)
+    fitted = shared_map(_extension_fitted, [(ctx, current, cause, results[cause], variants_tried.get(cause, []))
+                                            for cause in causes])
+    for cause, (res, seconds) in zip(causes, fitted):
         if res is None or res.objective >= current.objective:
             continue
         pool[cause] = res
         log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.objective / current.objective:.3f}, "
-             f"dBIC {current.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)", ctx.progress)
+             f"dBIC {current.bic - res.bic:.1f} ({seconds:.1f} s)", ctx.progress)
     return pool
+
+
+def _extension_fitted(args: tuple[Context, FitResult, str, FitResult, list[Effect]]
+                      ) -> tuple[FitResult | None, float]:
+    """``current`` plus one cause (:func:`_extend`) and the seconds it took (:func:`_extensions`)."""
+    ctx, current, cause, single, variants = args
+    t = time.perf_counter()
+    return _extend(ctx, current, cause, single, variants), time.perf_counter() - t
 
 
 # ============================================================================== fitting causes
