@@ -534,13 +534,15 @@ def _fit_cause(ctx: Context, cause: str, base: FitResult, must_beat: float, top:
                                level=ctx.prior is not None)
     pools: list[list[tuple[float, Effect, FrequencyFit, FitResult]]] = []
     best = None
-    for start in [circuit] + ([ctx.nominal] if ctx.nominal is not None and not base.effects and from_nominal
-                              else []):
+    starts = [circuit] + ([ctx.nominal] if ctx.nominal is not None and not base.effects and from_nominal else [])
+    # the forms screened, then the best refined, each batch shared with the helper process (:mod:`.cores`); the
+    # design values' screening goes in the batch of the first refinement (not used if that reaches the noise)
+    ahead = None
+    for k, start in enumerate(starts):
         if pools and best is not None and ctx.explained(best):
             break  # explained to the noise from the fitted baseline: the design values are not needed
-        # the forms screened, then the best refined, each batch shared with the helper process (:mod:`.cores`)
-        screened = [(pre.cost, eff, fit, pre) for eff, (fit, pre) in
-                    zip(variants, shared_map(_screened_form, [(ctx, start, eff) for eff in variants])) if pre]
+        fitted = ahead if ahead is not None else shared_map(_screened_form, [(ctx, start, eff) for eff in variants])
+        screened = [(pre.cost, eff, fit, pre) for eff, (fit, pre) in zip(variants, fitted) if pre]
         screened.sort(key=lambda t: t[0])
         pools.append(screened)
         # a form that is a special case of another screened form (one relaxation time of a distribution) is not
@@ -548,13 +550,22 @@ def _fit_cause(ctx: Context, cause: str, base: FitResult, must_beat: float, top:
         refine = [t for t in screened if not any(t[1].nested_in(u[1]) for u in screened)][:top if len(pools) == 1
                                                                                           else 1]
         nfev = 50 if len(pools) == 1 else 30
-        refined = shared_map(_refined_form, [(ctx, fit, eff, pre, must_beat, nfev) for _, eff, fit, pre in refine])
+        jobs = [(_refined_form, (ctx, fit, eff, pre, must_beat, nfev)) for _, eff, fit, pre in refine]
+        following = [(_screened_form, (ctx, starts[k + 1], eff)) for eff in variants] if k + 1 < len(starts) else []
+        done = shared_map(_form_job, jobs + following)
+        refined, ahead = done[: len(jobs)], (done[len(jobs):] if following else None)
         for i, ((cost, *_), res) in enumerate(zip(refine, refined)):
             if i and best is not None and best.objective < must_beat and cost > 2 * screened[0][0]:
                 break  # a clearly worse variant is not refined (its fit, run beside the first, is not used)
             if res is not None and (best is None or res.objective < best.objective):
                 best = res
     return best, [t[1] for t in pools[0]]
+
+
+def _form_job(job: tuple[Any, tuple]) -> Any:
+    """``fn(args)`` of a ``(fn, args)`` pair: a screening and a refinement in one batch (:func:`_fit_cause`)."""
+    fn, args = job
+    return fn(args)
 
 
 def _screened_form(args: tuple[Context, Circuit, Effect]) -> tuple[FrequencyFit | None, FitResult | None]:
