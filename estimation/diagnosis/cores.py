@@ -29,8 +29,10 @@ import importlib
 import multiprocessing
 import os
 import pickle
+import queue
 import signal
 import sys
+import threading
 import types
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar
@@ -66,6 +68,19 @@ class _Helper:
             self.proc.start()
         child.close()
         self.pid = os.getpid()
+        # the helper's messages read as they come: a result larger than the pipe's buffer would otherwise hold the
+        # helper until this process finished its own items
+        self.inbox: queue.Queue = queue.Queue()
+        self.reader = threading.Thread(target=self._read, name="pris-diagnose-helper-reader", daemon=True)
+        self.reader.start()
+
+    def _read(self) -> None:
+        while True:
+            try:
+                self.inbox.put(self.conn.recv())
+            except (EOFError, OSError):
+                self.inbox.put(None)
+                return
 
     def claim_low(self) -> int:
         """The next item from the start, or -1 when the two ends have met."""
@@ -77,10 +92,16 @@ class _Helper:
 
     def receive(self) -> tuple:
         """The helper's next message; raises ``EOFError`` once it has died."""
-        while not self.conn.poll(POLL_S):
-            if not self.proc.is_alive():
+        while True:
+            try:
+                msg = self.inbox.get(timeout=POLL_S)
+            except queue.Empty:
+                if not self.proc.is_alive() and self.inbox.empty():
+                    raise EOFError("the helper process died") from None
+                continue
+            if msg is None:
                 raise EOFError("the helper process died")
-        return self.conn.recv()
+            return msg
 
     def settle(self) -> None:
         """Wait until the helper has finished the batch in hand (its end message read); raises ``EOFError`` if it
