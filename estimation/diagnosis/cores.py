@@ -78,7 +78,7 @@ class _Helper:
         while True:
             try:
                 self.inbox.put(self.conn.recv())
-            except (EOFError, OSError):
+            except Exception:  # noqa: BLE001  (closed, died, or a message that does not unpickle: given up)
                 self.inbox.put(None)
                 return
 
