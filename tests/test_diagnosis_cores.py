@@ -51,6 +51,19 @@ def test_a_batch_within_an_item_runs_where_the_item_runs():
     assert cores.shared_map(abs, [-1, -2, -3]) == [1, 2, 3]  # and the helper is free again
 
 
+@needs_helper
+def test_a_batch_finishes_here_when_the_helper_dies():
+    batch = cores.SharedBatch(time.sleep, [0.2] * 8)
+    assert batch.shared
+    cores._helper.proc.kill()
+    try:
+        assert batch.result() == [None] * 8  # every item run, here
+        assert cores._broken and not cores.helper_wanted()  # given up for the rest of the process
+    finally:
+        cores._broken = False  # (the other tests: a new helper)
+    assert cores.shared_map(abs, [-1, -2, -3]) == [1, 2, 3] and cores._helper.proc.is_alive()
+
+
 def test_switched_off_by_the_environment(monkeypatch):
     monkeypatch.setenv(cores.JOBS_VARIABLE, "1")
     assert not cores.helper_wanted()
