@@ -678,22 +678,11 @@ def _drop_redundant(ctx: Context, current: FitResult, chosen: list[str], steps: 
     changed = True
     while changed and len(current.effects) > 1:
         changed = False
-        nc = current_nc(current)
-        offsets = np.cumsum([0] + [len(e.parameters) for e in current.effects])
-        for j, eff in enumerate(current.effects):
-            if eff.cause in STRUCTURAL:
-                continue
-            circuit = current.fitted_circuit()
-            if eff.cause == "core-loss" and circuit.has_element("Rcore") and not (
-                    ctx.nominal is not None and ctx.nominal.has_element("Rcore")):
-                circuit = replace(circuit, elements=[e for e in circuit.elements if e.key != "rcore"])
-            keep = [e for i, e in enumerate(current.effects) if i != j]
-            tail = np.concatenate([current.x[nc + offsets[i]: nc + offsets[i + 1]]
-                                   for i in range(len(current.effects)) if i != j])
-            try:
-                fit = ctx.fit(circuit, keep, couplings=current.couplings)
-                res = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
-            except _CANDIDATE_FAILURES:  # the network degenerates without this effect: it stays
+        # the model without each effect, shared with the helper process (:mod:`.cores`); read in order, up to the
+        # first effect dropped
+        without = shared_map(_without_effect, [(ctx, current, j) for j in range(len(current.effects))])
+        for j, (eff, res) in enumerate(zip(current.effects, without)):
+            if eff.cause in STRUCTURAL or res is None:  # (None: the network degenerates without it: it stays)
                 continue
             if res.bic - current.bic >= min_delta_bic:
                 log(f"{eff.cause} kept: without it the BIC is higher by {res.bic - current.bic:.1f}", progress)
@@ -710,6 +699,29 @@ def _drop_redundant(ctx: Context, current: FitResult, chosen: list[str], steps: 
                 changed = True
                 break
     return current, chosen, steps
+
+
+def _without_effect(args: tuple[Context, FitResult, int]) -> FitResult | None:
+    """``current`` refitted without its effect ``j`` (warm start; :func:`_drop_redundant`); None for a structural
+    cause or when the network degenerates. A core loss that added its resistor is removed with it."""
+    ctx, current, j = args
+    eff = current.effects[j]
+    if eff.cause in STRUCTURAL:
+        return None
+    nc = current_nc(current)
+    offsets = np.cumsum([0] + [len(e.parameters) for e in current.effects])
+    circuit = current.fitted_circuit()
+    if eff.cause == "core-loss" and circuit.has_element("Rcore") and not (
+            ctx.nominal is not None and ctx.nominal.has_element("Rcore")):
+        circuit = replace(circuit, elements=[e for e in circuit.elements if e.key != "rcore"])
+    keep = [e for i, e in enumerate(current.effects) if i != j]
+    tail = np.concatenate([current.x[nc + offsets[i]: nc + offsets[i + 1]]
+                           for i in range(len(current.effects)) if i != j])
+    try:
+        fit = ctx.fit(circuit, keep, couplings=current.couplings)
+        return fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
+    except _CANDIDATE_FAILURES:
+        return None
 
 
 def _topology(circuit: Circuit) -> list[tuple[str, str, tuple[str, ...]]]:

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from .catalogue import Effect, effect_variants, winding_groups
+from .cores import shared_map
 from .fit import FitResult, configuration_ports, group_names
 
 #: Screening: local fits (of the effects' parameters) per variant, and their evaluations.
@@ -27,6 +28,21 @@ SCREEN_STARTS = 2
 SCREEN_NFEV = 20
 #: Evaluations of the full fit of the best screened variant.
 FULL_NFEV = 40
+
+
+def _form_screened(args: tuple) -> tuple[Any, FitResult | None]:
+    """Effect ``j`` of ``current`` in form ``v``, its parameters alone fitted from their grid (:func:`rechoose_forms`);
+    ``(None, None)`` when the fit fails."""
+    ctx, circuit, current, j, v, eff, tails, failures = args
+    effects = _swapped(current.effects, j, v)
+    try:
+        fit = ctx.fit(circuit, effects, couplings=current.couplings)
+        grid = _grid(v, eff, tails[j])
+        x0s = np.array([np.concatenate([np.zeros(fit.nc)] + [t for t in tails[:j]] + [g]
+                                       + [t for t in tails[j + 1:]]) for g in grid])
+        return fit, fit.fit(x0s=x0s, grid=False, circuit_free=False, max_nfev=SCREEN_NFEV, keep_starts=SCREEN_STARTS)
+    except failures:
+        return None, None
 
 
 def rechoose_forms(ctx: Any, current: FitResult, min_delta_bic: float, failures: tuple[type[Exception], ...],
@@ -69,19 +85,9 @@ def rechoose_forms(ctx: Any, current: FitResult, min_delta_bic: float, failures:
         nc = _nc(current)
         offsets = np.cumsum([0] + [len(e.parameters) for e in current.effects])
         tails = [list(current.x[nc + offsets[i]: nc + offsets[i + 1]]) for i in range(len(current.effects))]
-        screened = []
-        for v in variants:
-            effects = _swapped(current.effects, j, v)
-            try:
-                fit = ctx.fit(circuit, effects, couplings=current.couplings)
-                grid = _grid(v, eff, tails[j])
-                x0s = np.array([np.concatenate([np.zeros(fit.nc)] + [t for t in tails[:j]] + [g]
-                                               + [t for t in tails[j + 1:]]) for g in grid])
-                pre = fit.fit(x0s=x0s, grid=False, circuit_free=False, max_nfev=SCREEN_NFEV,
-                              keep_starts=SCREEN_STARTS)
-            except failures:
-                continue
-            screened.append((pre.objective, v, fit, pre))
+        # the other forms screened, shared with the helper process (:mod:`.cores`)
+        done = shared_map(_form_screened, [(ctx, circuit, current, j, v, eff, tails, failures) for v in variants])
+        screened = [(pre.objective, v, fit, pre) for v, (fit, pre) in zip(variants, done) if pre is not None]
         if not screened:
             continue
         _, v, fit, pre = min(screened, key=lambda t: t[0])
