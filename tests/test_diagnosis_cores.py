@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from estimation.diagnosis import cores
+from estimation.diagnosis.fit import DiagnosisError
 
 ROOT = Path(__file__).resolve().parents[1]
 needs_helper = pytest.mark.skipif(not cores.helper_wanted(), reason="no second core or no fork server here")
@@ -45,6 +46,16 @@ def test_the_helper_sees_the_items_as_they_were_when_handed_over():
 
 
 @needs_helper
+def test_a_cancelled_batch_leaves_the_helper_free():
+    abandoned = cores.SharedBatch(time.sleep, [0.2] * 6)
+    assert abandoned.shared
+    abandoned.cancel()
+    batch = cores.SharedBatch(abs, [-1, -2, -3, -4])
+    assert batch.shared  # the helper takes the next batch once it has finished the item it was running
+    assert batch.result() == [1, 2, 3, 4]
+
+
+@needs_helper
 def test_a_batch_within_an_item_runs_where_the_item_runs():
     nested = functools.partial(cores.shared_map, abs)
     assert cores.shared_map(nested, [[-1, -2], [-3, -4], [-5], [-6, -7, -8]]) == [[1, 2], [3, 4], [5], [6, 7, 8]]
@@ -69,6 +80,13 @@ def test_switched_off_by_the_environment(monkeypatch):
     assert not cores.helper_wanted()
     batch = cores.SharedBatch(abs, [-1, -2, -3])
     assert not batch.shared and batch.result() == [1, 2, 3]
+
+
+@pytest.mark.parametrize("value", ["abc", "0", "-2", "1.5"])
+def test_a_bad_setting_is_refused_with_its_name(monkeypatch, value):
+    monkeypatch.setenv(cores.JOBS_VARIABLE, value)
+    with pytest.raises(DiagnosisError, match=cores.JOBS_VARIABLE):
+        cores.helper_wanted()
 
 
 def _wanted_in_daemon(queue) -> None:

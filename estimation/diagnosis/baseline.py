@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 
 from pris_cosim.models import Model, lumped_rlc
 
 from .align import aligned_start
-from .cores import SharedBatch, helper_available, starts_fitted
+from .cores import SharedBatch, helper_available
 from .fit import DiagnosisError, FitResult, FrequencyFit
 
 
@@ -62,13 +63,13 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
         the random starts (the noise floor).
     """
     x0 = fit.start_vectors()[0]
-    batch = None
-    if starts > 0 and helper_available() and float(np.sum(fit.residuals(x0) ** 2)) > PRELAUNCH_ABOVE * good_enough:
-        # far from good enough: the random starts' short fits are handed to the helper process (:mod:`.cores`)
-        # before the fit from the given values runs here (the result does not depend on the order)
-        batch = _StartsFitted(fit, x0, starts, spread, max_nfev)
+    # with a helper process (:mod:`.cores`), the random starts' short fits are handed to it before the fit from the
+    # given values runs here (the result does not depend on the order), and given up if that fit is good enough
+    batch = _StartsFitted(fit, x0, starts, spread, max_nfev) if starts > 0 and helper_available() else None
     first = fit.fit_continued(x0, max_nfev=max_nfev)
     if first.objective <= good_enough or starts <= 0:
+        if batch is not None:
+            batch.batch.cancel()
         return first
     short = (batch or _StartsFitted(fit, x0, starts, spread, max_nfev)).result()
     if short.objective >= first.objective:
@@ -77,11 +78,6 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     best.wall_s += first.wall_s + short.wall_s
     best.alternative = first  # the optimum reached from the given values: structures are sought from it too
     return best
-
-
-#: The random starts are handed to the helper process before the fit from the given values when the given values
-#: cost more than this many times ``good_enough`` (that fit then seldom makes them unneeded).
-PRELAUNCH_ABOVE = 4.0
 
 
 class _StartsFitted:
@@ -102,23 +98,28 @@ class _StartsFitted:
         r = fit.residuals_batch(X)
         self.screened = np.sum(r * r, axis=1)
         self.order = np.argsort(self.screened)
-        self.batch = SharedBatch(starts_fitted, [(fit, X[i], self.options) for i in self.order])
-        # and from the given values with the model's resonances moved onto the measured ones
+        self.batch = SharedBatch(_start_fitted, [(fit, X[i], self.options) for i in self.order])
+        # and from the given values with the model's resonances moved onto the measured ones (row 0 of the starts)
         aligned = aligned_start(fit, x0)
         self.aligned = None if aligned is None else np.clip(aligned, lo + 1e-9, hi - 1e-9)
+        if self.aligned is not None:
+            r = fit.residuals_batch(self.aligned[None])
+            self.screened = np.concatenate([np.sum(r * r, axis=1), self.screened])
 
     def result(self) -> FitResult:
         """The best fit; of equal costs the first in the screened order."""
-        fitted: dict[int, tuple] = {}  # by row of the starts (the aligned start first, as row 0)
-        screened = self.screened
-        if self.aligned is not None:
-            fitted[0] = starts_fitted((self.fit, self.aligned, self.options))
-            r = self.fit.residuals_batch(self.aligned[None])
-            screened = np.concatenate([np.sum(r * r, axis=1), screened])
         shift = 0 if self.aligned is None else 1
-        for i, res in zip(self.order, self.batch.result()):
-            fitted[int(i) + shift] = res
-        rank = {int(row): k for k, row in enumerate(np.argsort(screened))}
+        fitted = {} if self.aligned is None else {0: _start_fitted((self.fit, self.aligned, self.options))}
+        fitted.update({int(i) + shift: res for i, res in zip(self.order, self.batch.result())})  # by row
+        rank = {int(row): k for k, row in enumerate(np.argsort(self.screened))}
         best = min(fitted, key=lambda row: (fitted[row][1], rank[row]))
         return self.fit.result(fitted[best][0], None, len(fitted) + sum(n for _, _, n in fitted.values()),
                                time.perf_counter() - self.t0)
+
+
+def _start_fitted(args: tuple[FrequencyFit, np.ndarray, dict[str, Any]]) -> tuple[np.ndarray, float, int]:
+    """One short local fit from one start: ``(fit, x0, options)`` to ``(x, cost, nfev)``, the cost as
+    :meth:`.fit.FrequencyFit.fit` ranks its starts (the sum of the squared residuals)."""
+    fit, x0, options = args
+    r = fit.fit(x0s=x0[None], grid=False, keep_starts=1, **options)
+    return r.x, float(np.sum(fit.residuals(r.x) ** 2)), int(r.nfev)

@@ -16,7 +16,8 @@ does not. A diagnosis gives the same answer with or without the helper.
 
 The helper is not used inside a daemonic process (a Dask worker cannot
 have children), on a machine with one core, or when the environment
-variable ``PRIS_DIAGNOSE_JOBS`` is ``1``; it is given up for the rest of the
+variable ``PRIS_DIAGNOSE_JOBS`` is ``1`` (any other value but a whole
+number is refused); it is given up for the rest of the
 process if it cannot be started or dies (the work is then done here). It
 is started without the caller's main script (:func:`_main_hidden`), so a
 script without an ``if __name__ == "__main__"`` guard is not run twice.
@@ -37,12 +38,11 @@ import types
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar
 
-import numpy as np
-
 T = TypeVar("T")
 R = TypeVar("R")
 
-#: Environment variable: ``1`` (or ``0``) runs every fit of a diagnosis in this process.
+#: Environment variable: ``1`` runs every fit of a diagnosis in this process (unset, or 2 and more: a helper when
+#: there is a second core).
 JOBS_VARIABLE = "PRIS_DIAGNOSE_JOBS"
 #: Seconds between checks that the helper is still alive while its results are awaited.
 POLL_S = 0.5
@@ -134,9 +134,22 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
+def jobs_setting() -> int | None:
+    """``PRIS_DIAGNOSE_JOBS`` as a whole number >= 1 (None when unset); raises :class:`.fit.DiagnosisError` naming
+    the variable for any other value."""
+    text = os.environ.get(JOBS_VARIABLE, "").strip()
+    if not text:
+        return None
+    if not text.isdigit() or int(text) < 1:
+        from .fit import DiagnosisError
+
+        raise DiagnosisError(f"{JOBS_VARIABLE}={text!r}: expected a whole number of processes >= 1 (1: one core)")
+    return int(text)
+
+
 def helper_wanted() -> bool:
     """A helper process may be used: two or more cores, not a daemonic process, not switched off."""
-    if os.environ.get(JOBS_VARIABLE, "").strip() in ("0", "1") or _broken:
+    if jobs_setting() == 1 or _broken:
         return False
     if multiprocessing.current_process().daemon or _cores() < 2:
         return False
@@ -213,13 +226,9 @@ def _helper_loop(conn: Any, lock: Any, bounds: Any, parent: int) -> None:
 
 
 def helper_available() -> bool:
-    """A helper process runs (started now if wanted and not yet running)."""
+    """A helper process runs (started now if wanted and not yet running; it imports the fitting modules in the
+    background)."""
     return _get_helper() is not None
-
-
-def warm_up() -> None:
-    """Start the helper (if wanted; it imports the fitting modules in the background)."""
-    _get_helper()
 
 
 def _give_up() -> None:
@@ -242,7 +251,8 @@ class SharedBatch:
     computation on the same values). ``fn`` must be a module-level function
     and ``items`` picklable. Without a helper (none wanted, or a failure),
     every item is run here. One batch at a time: a batch begun while
-    another is handed over (within one of its items, say) runs here.
+    another is handed over (within one of its items, say) runs here; a
+    batch whose results are not wanted is given up with :meth:`cancel`.
     """
 
     def __init__(self, fn: Callable[[T], R], items: Sequence[T]) -> None:
@@ -264,6 +274,14 @@ class SharedBatch:
             _give_up()
             return
         helper.busy, helper.active, self.helper = True, True, helper
+
+    def cancel(self) -> None:
+        """Give the batch up without its results: the helper stops claiming (it finishes the item it runs, whose
+        result is read and dropped before the next batch) and is free for the next batch."""
+        if self.helper is not None:
+            self.helper.stop()
+            self.helper.active = False
+            self.helper = None
 
     @property
     def shared(self) -> bool:
@@ -312,10 +330,3 @@ def shared_map(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
     while this process runs them from the start (:class:`SharedBatch`).
     """
     return SharedBatch(fn, items).result()
-
-
-def starts_fitted(args: tuple[Any, Any, dict[str, Any]]) -> tuple[Any, float, int]:
-    """One local fit from one start row: ``(fit, x0, options)`` to ``(x, cost, nfev)`` (for :func:`shared_map`)."""
-    fit, x0, options = args
-    r = fit.fit(x0s=x0[None], grid=False, keep_starts=1, **options)
-    return r.x, float(np.sum(fit.residuals(r.x) ** 2)), int(r.nfev)

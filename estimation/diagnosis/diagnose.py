@@ -73,7 +73,7 @@ from pris_cosim.frf import Response
 from pris_cosim.models import Configuration, Model, get_model
 
 from .baseline import fit_multistart, lumped_from_data
-from .cores import shared_map, warm_up
+from .cores import helper_available, shared_map
 from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
 from .evidence import band_table, localise, noise_floor, noise_weights, resonance_comparison, unexplained_bands
 from .fit import (CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit, configuration_ports, current_nc,
@@ -153,7 +153,7 @@ def diagnose_frequency(
     """
     from threadpoolctl import threadpool_limits
 
-    warm_up()  # the helper process on another core (:mod:`.cores`), started while the first fits run here
+    helper_available()  # the helper process on another core (:mod:`.cores`), started while the first fits run here
     with threadpool_limits(limits=1):  # small matrices: BLAS threads only contend for the cores
         try:
             return _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_gain, min_step_gain,

@@ -106,7 +106,8 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple
                                tol=1e-7)
             moved = ctx.prior.drift({name: free_fit.values[name]})
             if not moved:
-                return None, f"{name}: x{d['ratio']:.3g} off the design, back within the tolerance once freed: not reported"
+                return None, (f"{name}: x{d['ratio']:.3g} off the design, back within the tolerance once freed: "
+                              "not reported")
             d = moved[0]
         edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
         held = free_fit.fitted_circuit().with_values({name: edge})
