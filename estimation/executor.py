@@ -575,6 +575,13 @@ class _FuturesBackend(_WindowBackend):
         for process in processes:
             with suppress(Exception):
                 process.join(2.0)
+        # The pool's management thread closes its wake-up pipe once it sees the workers gone. Left running, it
+        # races the interpreter's exit hook, which writes to that pipe: "OSError: [Errno 9] Bad file descriptor"
+        # after the one-line message (Python 3.11). Waiting for it here leaves the pipe closed before exit.
+        manager = getattr(self.executor, "_executor_manager_thread", None)
+        if manager is not None:
+            with suppress(Exception):
+                manager.join(5.0)
 
 
 class _DaskBackend(_WindowBackend):

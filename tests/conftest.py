@@ -2,7 +2,16 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+from estimation._threads import single_threaded_blas
+
+# Under pytest-xdist (``-n 2``) every worker process shares the cores with the others: one BLAS thread each, set
+# before the test modules import numpy, and inherited by the commands the tests start. Multi-threaded OpenBLAS
+# on the small matrices of these problems spins idle threads for the cores the other worker uses.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    single_threaded_blas()
 
 import pytest
 

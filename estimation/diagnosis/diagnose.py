@@ -74,10 +74,9 @@ from pris_cosim.models import Configuration, Model, get_model
 
 from .baseline import fit_multistart, lumped_from_data
 from .cores import helper_available, shared_map
-from .catalogue import FREQUENCY_CAUSES, CoreLoss, Effect, effect_variants, winding_groups
+from .catalogue import FREQUENCY_CAUSES, Effect
 from .evidence import band_table, localise, noise_floor, noise_weights, resonance_comparison, unexplained_bands
-from .fit import (CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit, configuration_ports, current_nc,
-                  group_names, significant)
+from .fit import CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit, current_nc, significant
 from .drift import located_drift, relaxed_drift
 from .converge import converged
 from .holdout import held_out_gain
@@ -86,6 +85,7 @@ from .forms import rechoose_forms
 from .realise import realise_extended
 from .result import Diagnosis
 from .section_fits import fit_missing_section, section_pairs
+from .single import effect_starts, single_causes
 from .unmerge import missing_modes, resolved_points
 from .context import (MAX_BASELINE_RMS, NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR, UNMERGE_ABOVE_FLOOR, Context,
                       log)
@@ -249,7 +249,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if not passes:
         log("the baseline fits to the noise floor within the design tolerance: no cause is fitted", progress)
     for attempt in range(passes):
-        res_i, failed_i, variants_i = _single_causes(ctx, todo, baseline, progress)
+        res_i, failed_i, variants_i = single_causes(ctx, todo, baseline, progress)
         for cause, r in res_i.items():
             if cause not in results or r.objective < results[cause].objective:
                 results[cause] = r
@@ -510,84 +510,6 @@ def _extension_fitted(args: tuple[Context, FitResult, str, FitResult, list[Effec
 HOLDOUT_NFEV = 100
 
 
-def _effect_starts(ctx: Context, fit: FrequencyFit, effect: Effect) -> list[dict[str, float]] | None:
-    if isinstance(effect, CoreLoss):
-        return effect.starts(fit.circuit, fit.circuit.resolve(check=False), ctx.scale, float(ctx.f[0]), float(ctx.f[-1]))
-    return None
-
-
-def _fit_cause(ctx: Context, cause: str, base: FitResult, must_beat: float, top: int = 2,
-               from_nominal: bool = True) -> tuple[FitResult | None, list[Effect]]:
-    """Every form and group of ``cause``: effect-only fits from the start grids, then the best in full.
-
-    The effect-only fits start from the fitted baseline's values and, when
-    the baseline was given (a netlist or a built-in model), from its nominal
-    values too: a baseline fitted without the effect has absorbed it into
-    distorted values, a local minimum the full fit seldom leaves, while the
-    design values are free of it. The best ``top`` of the first pool and
-    (unless those reach the noise floor, or ``from_nominal`` is false) the
-    best of the second are fitted in full.
-    """
-    circuit = base.fitted_circuit()
-    groups = winding_groups(circuit, configuration_ports(ctx.configs), group_names(ctx.configs))
-    variants = effect_variants(cause, groups, circuit, float(ctx.f[0]), ctx.one_port, ctx.scale, float(ctx.f[-1]),
-                               level=ctx.prior is not None)
-    pools: list[list[tuple[float, Effect, FrequencyFit, FitResult]]] = []
-    best = None
-    starts = [circuit] + ([ctx.nominal] if ctx.nominal is not None and not base.effects and from_nominal else [])
-    # the forms screened, then the best refined, each batch shared with the helper process (:mod:`.cores`); the
-    # design values' screening goes in the batch of the first refinement (not used if that reaches the noise)
-    ahead = None
-    for k, start in enumerate(starts):
-        if pools and best is not None and ctx.explained(best):
-            break  # explained to the noise from the fitted baseline: the design values are not needed
-        fitted = ahead if ahead is not None else shared_map(_screened_form, [(ctx, start, eff) for eff in variants])
-        screened = [(pre.cost, eff, fit, pre) for eff, (fit, pre) in zip(variants, fitted) if pre]
-        screened.sort(key=lambda t: t[0])
-        pools.append(screened)
-        # a form that is a special case of another screened form (one relaxation time of a distribution) is not
-        # refined: the wider form's fit covers it, and it would take the place of another form
-        refine = [t for t in screened if not any(t[1].nested_in(u[1]) for u in screened)][:top if len(pools) == 1
-                                                                                          else 1]
-        nfev = 50 if len(pools) == 1 else 30
-        jobs = [(_refined_form, (ctx, fit, eff, pre, must_beat, nfev)) for _, eff, fit, pre in refine]
-        following = [(_screened_form, (ctx, starts[k + 1], eff)) for eff in variants] if k + 1 < len(starts) else []
-        done = shared_map(_form_job, jobs + following)
-        refined, ahead = done[: len(jobs)], (done[len(jobs):] if following else None)
-        for i, ((cost, *_), res) in enumerate(zip(refine, refined)):
-            if i and best is not None and best.objective < must_beat and cost > 2 * screened[0][0]:
-                break  # a clearly worse variant is not refined (its fit, run beside the first, is not used)
-            if res is not None and (best is None or res.objective < best.objective):
-                best = res
-    return best, [t[1] for t in pools[0]]
-
-
-def _form_job(job: tuple[Any, tuple]) -> Any:
-    """``fn(args)`` of a ``(fn, args)`` pair: a screening and a refinement in one batch (:func:`_fit_cause`)."""
-    fn, args = job
-    return fn(args)
-
-
-def _screened_form(args: tuple[Context, Circuit, Effect]) -> tuple[FrequencyFit | None, FitResult | None]:
-    """The effect's parameters alone fitted from its start grid on ``circuit`` (:func:`_fit_cause`)."""
-    ctx, circuit, eff = args
-    try:
-        fit = ctx.fit(circuit, [eff])
-        return fit, fit.fit([_effect_starts(ctx, fit, eff)], circuit_free=False, max_nfev=40, keep_starts=2)
-    except _CANDIDATE_FAILURES:
-        return None, None
-
-
-def _refined_form(args: tuple[Context, FrequencyFit, Effect, FitResult, float, int]) -> FitResult | None:
-    """A screened form fitted in full, circuit values free (:func:`_fit_cause`)."""
-    ctx, fit, eff, pre, must_beat, nfev = args
-    try:
-        return fit.fit([_effect_starts(ctx, fit, eff)], x0s=pre.x[None], keep_starts=1, must_beat=must_beat,
-                       max_nfev=nfev, tol=1e-6)
-    except _CANDIDATE_FAILURES:
-        return None
-
-
 #: What a candidate's fit may raise when its parameters make the network degenerate (e.g. a node left with
 #: only inductors): the candidate is dropped, the diagnosis goes on.
 _CANDIDATE_FAILURES = CANDIDATE_FAILURES
@@ -626,46 +548,6 @@ def _baseline_refitted(args: tuple[Context, Circuit, int]) -> FitResult | None:
         return ctx.fit(circuit).fit(max_nfev=nfev, tol=1e-8)
     except _CANDIDATE_FAILURES:
         return None
-
-
-def _single_causes(ctx: Context, todo: Sequence[str], baseline: FitResult, progress: bool
-                   ) -> tuple[dict[str, FitResult], list[dict[str, Any]], dict[str, list[Effect]]]:
-    """Each cause fitted alone with the baseline's values; the fits that end above the baseline are failed."""
-    results: dict[str, FitResult] = {}
-    failed: list[dict[str, Any]] = []
-    variants_tried: dict[str, list[Effect]] = {}
-    for cause in todo:
-        t = time.perf_counter()
-        if cause == "missing-section":
-            res = fit_missing_section(ctx, baseline, [], must_beat=baseline.objective)
-            # the structures also from the baseline's optimum nearest the given values (:func:`fit_multistart`):
-            # a split of a better-fitting but more distorted optimum can stop far above the split of the other
-            # (not once another cause explains the data to the noise: the split then only has to be ranked)
-            alt = getattr(baseline, "alternative", None)
-            if alt is not None and not any(ctx.explained(r) for r in results.values()):
-                other = fit_missing_section(ctx, alt, [], must_beat=baseline.objective)
-                if other is not None and (res is None or other.objective < res.objective):
-                    res = other
-        else:
-            # once a cause explains the data to the noise, the others are fitted from the fitted baseline only
-            explained = any(ctx.explained(r) for r in results.values())
-            # with a design prior, a baseline whose values all stay within GROSS_DRIFT tolerances has absorbed
-            # nothing: the design values add no start
-            distorted = ctx.prior is None or ctx.distorted(baseline)
-            res, variants = _fit_cause(ctx, cause, baseline, must_beat=baseline.objective,
-                                       from_nominal=distorted and not explained)
-            variants_tried[cause] = variants
-        if res is None:
-            continue
-        if res.objective >= baseline.objective:
-            failed.append({"cause": cause, "cost": res.cost, "reason": "every start ended at or above the baseline cost"})
-            log(f"{cause}: failed (cost {res.cost:.4g} >= baseline {baseline.cost:.4g})", progress)
-            continue
-        results[cause] = res
-        log(f"{cause}: {res.structure or res.effects[0].label}: cost {res.cost:.4g}, gain "
-             f"{1 - res.cost / baseline.cost:.3f}, dBIC {baseline.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)",
-             progress)
-    return results, failed, variants_tried
 
 
 def _drop_redundant(ctx: Context, current: FitResult, chosen: list[str], steps: list[dict[str, Any]],
@@ -740,7 +622,7 @@ def _extend(ctx: Context, current: FitResult, cause: str, single: FitResult, var
     best = None
     for eff in order:
         fit = ctx.fit(circuit, list(current.effects) + [eff], couplings=current.couplings)
-        grid = (_effect_starts(ctx, fit, eff) or
+        grid = (effect_starts(ctx, fit, eff) or
                 [dict(zip([p.name for p in eff.parameters], vals)) for vals in itertools.product(
                     *[p.starts or (np.sqrt(p.lower * p.upper),) for p in eff.parameters])])
         tails = [[np.log(g[p.name]) if p.log else g[p.name] for p in eff.parameters] for g in grid]
