@@ -2,7 +2,7 @@
 
 A diagnosis spends most of its time in batches of local fits that do not
 depend on each other: the random starts of the baseline
-(:func:`.baseline.fit_multistart`), the forms of every cause (:mod:`.single`), the candidate
+(:func:`.baseline.fit_multistart`), the forms of each cause (:mod:`.single`), the candidate
 sections and seeds of a missing section, the baseline refitted from each
 candidate's values, and the check of each drifted value
 (:func:`.drift.relaxed_drift`). On a machine with a second core, one helper

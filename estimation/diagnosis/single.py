@@ -11,16 +11,10 @@ best of the second are then fitted in full (circuit values free). A cause
 that reaches the noise floor from the fitted baseline needs no second pool,
 and once one cause does, the others start from the fitted baseline only.
 
-The causes do not depend on each other's fits but for that last rule, so
-the fits of all causes run in batches shared with the helper process
-(:mod:`.cores`): every screening from the fitted baseline; the refinements
-of those; then, for the causes that may need them (those before the first
-that explains the data), the screenings from the design values and their
-refinements, two causes at a time with the helper (one without it) until
-one explains the data. The rule is then applied in the catalogue's order to what was
-fitted, which gives each cause the fit it would have had fitted alone in
-that order (a fit the rule does not use is discarded). A missing
-section (:mod:`.section_fits`) is fitted at its place in that order.
+Each batch (the screenings of a cause's forms; their refinements, with the
+screenings from the design values beside them) is shared with the helper
+process (:mod:`.cores`). A missing section (:mod:`.section_fits`) is fitted
+at its place in the catalogue's order.
 """
 
 from __future__ import annotations
@@ -33,7 +27,7 @@ from pris_cosim.circuit import Circuit
 
 from .catalogue import CoreLoss, Effect, effect_variants, winding_groups
 from .context import Context, log
-from .cores import helper_available, shared_map
+from .cores import shared_map
 from .fit import CANDIDATE_FAILURES, FitResult, FrequencyFit, configuration_ports, group_names
 from .section_fits import fit_missing_section
 
@@ -88,8 +82,8 @@ def _to_refine(screened: list[Screened], top: int) -> list[Screened]:
 
 def _best_refined(screened: list[Screened], refine: list[Screened], refined: Sequence[FitResult | None],
                   must_beat: float, best: FitResult | None) -> FitResult | None:
-    """The best of ``best`` and a pool's refinements; a clearly worse form than the pool's best screened one is
-    not used once a refinement beats ``must_beat`` (it is fitted beside the first, not used)."""
+    """The best of ``best`` and a pool's refinements; a form clearly worse than the pool's best screened one is
+    not used once a fit beats ``must_beat`` (it is fitted beside the first, not used)."""
     for i, ((cost, *_), res) in enumerate(zip(refine, refined)):
         if i and best is not None and best.objective < must_beat and cost > 2 * screened[0][0]:
             break
@@ -98,31 +92,50 @@ def _best_refined(screened: list[Screened], refine: list[Screened], refined: Seq
     return best
 
 
-def _by_cause(flat: Sequence[Any], sizes: dict[str, int]) -> dict[str, list[Any]]:
-    """A flat batch's results cut back into each cause's share (``sizes``: items per cause, in batch order)."""
-    out, k = {}, 0
-    for cause, n in sizes.items():
-        out[cause] = list(flat[k:k + n])
-        k += n
-    return out
+def _form_job(job: tuple[Any, tuple]) -> Any:
+    """``fn(args)`` of a ``(fn, args)`` pair: a screening and a refinement in one batch (:func:`fit_cause`)."""
+    fn, args = job
+    return fn(args)
 
 
-def _screened_all(ctx: Context, circuit: Circuit, variants: dict[str, list[Effect]]) -> dict[str, list[Screened]]:
-    """Every form of every cause screened on ``circuit``, in one batch shared with the helper process."""
-    fitted = shared_map(_screened_form, [(ctx, circuit, eff) for forms in variants.values() for eff in forms])
-    return {c: _pool(variants[c], part) for c, part in _by_cause(fitted, {c: len(v) for c, v in variants.items()}).items()}
+def fit_cause(ctx: Context, cause: str, base: FitResult, must_beat: float, from_nominal: bool = True
+              ) -> tuple[FitResult | None, list[Effect]]:
+    """Every form and group of ``cause``: effect-only fits from the start grids, then the best in full.
 
-
-def _refined_all(ctx: Context, refine: dict[str, list[Screened]], must_beat: float, nfev: int
-                 ) -> dict[str, list[FitResult | None]]:
-    """The forms picked of every cause fitted in full, in one batch shared with the helper process."""
-    jobs = [(ctx, fit, eff, pre, must_beat, nfev) for forms in refine.values() for _, eff, fit, pre in forms]
-    return _by_cause(shared_map(_refined_form, jobs), {c: len(v) for c, v in refine.items()})
+    The best forms of the first pool (from ``base``'s fitted values) and,
+    unless those reach the noise floor or ``from_nominal`` is false, the
+    best of the second (from the design values, when the baseline was given
+    and ``base`` has no effect) are fitted in full. Returns the best fit and
+    the forms by screened cost from ``base``.
+    """
+    circuit = base.fitted_circuit()
+    groups = winding_groups(circuit, configuration_ports(ctx.configs), group_names(ctx.configs))
+    variants = effect_variants(cause, groups, circuit, float(ctx.f[0]), ctx.one_port, ctx.scale, float(ctx.f[-1]),
+                               level=ctx.prior is not None)
+    pools: list[list[Screened]] = []
+    best = None
+    starts = [circuit] + ([ctx.nominal] if ctx.nominal is not None and not base.effects and from_nominal else [])
+    # the design values' screening goes in the batch of the first refinement (not used if that reaches the noise)
+    ahead = None
+    for k, start in enumerate(starts):
+        if pools and best is not None and ctx.explained(best):
+            break  # explained to the noise from the fitted baseline: the design values are not needed
+        fitted = ahead if ahead is not None else shared_map(_screened_form, [(ctx, start, eff) for eff in variants])
+        screened = _pool(variants, fitted)
+        pools.append(screened)
+        top, nfev = (TOP_FIRST, NFEV_FIRST) if k == 0 else (TOP_SECOND, NFEV_SECOND)
+        refine = _to_refine(screened, top)
+        jobs = [(_refined_form, (ctx, fit, eff, pre, must_beat, nfev)) for _, eff, fit, pre in refine]
+        following = [(_screened_form, (ctx, starts[k + 1], eff)) for eff in variants] if k + 1 < len(starts) else []
+        done = shared_map(_form_job, jobs + following)
+        ahead = done[len(jobs):] if following else None
+        best = _best_refined(screened, refine, done[: len(jobs)], must_beat, best)
+    return best, [t[1] for t in pools[0]]
 
 
 def single_causes(ctx: Context, todo: Sequence[str], baseline: FitResult, progress: bool
                   ) -> tuple[dict[str, FitResult], list[dict[str, Any]], dict[str, list[Effect]]]:
-    """Each cause of ``todo`` fitted alone with the baseline's values.
+    """Each cause of ``todo`` fitted alone with the baseline's values, in that order.
 
     Returns
     -------
@@ -133,87 +146,37 @@ def single_causes(ctx: Context, todo: Sequence[str], baseline: FitResult, progre
     variants : dict
         The forms of each continuous cause, by screened cost from the fitted baseline.
     """
-    t0 = time.perf_counter()
-    must_beat = baseline.objective
-    circuit = baseline.fitted_circuit()
-    # with a design prior, a baseline whose values all stay within GROSS_DRIFT tolerances has absorbed nothing: the
-    # design values add no start
-    design_start = (ctx.nominal is not None and not baseline.effects
-                    and (ctx.prior is None or ctx.distorted(baseline)))
-    groups = winding_groups(circuit, configuration_ports(ctx.configs), group_names(ctx.configs))
-    continuous = [c for c in todo if c != "missing-section"]
-    variants = {c: effect_variants(c, groups, circuit, float(ctx.f[0]), ctx.one_port, ctx.scale, float(ctx.f[-1]),
-                                   level=ctx.prior is not None) for c in continuous}
-
-    # every form of every cause screened from the fitted baseline's values
-    first = _screened_all(ctx, circuit, {c: variants[c] for c in continuous})
-    refine_first = {c: _to_refine(first[c], TOP_FIRST) for c in continuous}
-    # their best forms refined
-    refined_first = _refined_all(ctx, refine_first, must_beat, NFEV_FIRST)
-    best_first = {c: _best_refined(first[c], refine_first[c], refined_first[c], must_beat, None) for c in continuous}
-    second: dict[str, list[Screened]] = {}
-    refine_second: dict[str, list[Screened]] = {}
-    refined_second: dict[str, list[FitResult | None]] = {}
-    if design_start:
-        # from the design values, the causes that may need them: those before the first cause that explains the
-        # data from the fitted baseline (every later one starts from the fitted baseline only) and do not; taken in
-        # order, as many at a time as there are processes, until one's fit from them explains the data (the helper's
-        # fit of the next cause, run beside it, is then not used)
-        need = []
-        for c in continuous:
-            b = best_first[c]
-            if b is not None and b.objective < must_beat and ctx.explained(b):
-                break
-            if b is None or not ctx.explained(b):
-                need.append(c)
-        width = 2 if helper_available() else 1
-        for k in range(0, len(need), width):
-            chunk = need[k:k + width]
-            second.update(_screened_all(ctx, ctx.nominal, {c: variants[c] for c in chunk}))
-            refine_second.update({c: _to_refine(second[c], TOP_SECOND) for c in chunk})
-            refined_second.update(_refined_all(ctx, {c: refine_second[c] for c in chunk}, must_beat, NFEV_SECOND))
-            finals = [_best_refined(second[c], refine_second[c], refined_second[c], must_beat, best_first[c])
-                      for c in chunk]
-            if any(r is not None and r.objective < must_beat and ctx.explained(r) for r in finals):
-                break
-    log(f"every form of {len(continuous)} causes fitted in {time.perf_counter() - t0:.1f} s", progress)
-
-    # the rule applied in the catalogue's order: once a cause explains the data, the others start from the fitted
-    # baseline only
     results: dict[str, FitResult] = {}
     failed: list[dict[str, Any]] = []
+    variants_tried: dict[str, list[Effect]] = {}
+    # with a design prior, a baseline whose values all stay within GROSS_DRIFT tolerances has absorbed nothing: the
+    # design values add no start
+    distorted = ctx.prior is None or ctx.distorted(baseline)
     for cause in todo:
         t = time.perf_counter()
         explained = any(ctx.explained(r) for r in results.values())
         if cause == "missing-section":
-            res = fit_missing_section(ctx, baseline, [], must_beat=must_beat)
+            res = fit_missing_section(ctx, baseline, [], must_beat=baseline.objective)
             # the structures also from the baseline's optimum nearest the given values (:func:`.baseline.fit_multistart`):
             # a split of a better-fitting but more distorted optimum can stop far above the split of the other
             # (not once another cause explains the data to the noise: the split then only has to be ranked)
             alt = getattr(baseline, "alternative", None)
             if alt is not None and not explained:
-                other = fit_missing_section(ctx, alt, [], must_beat=must_beat)
+                other = fit_missing_section(ctx, alt, [], must_beat=baseline.objective)
                 if other is not None and (res is None or other.objective < res.objective):
                     res = other
-            seconds = f" ({time.perf_counter() - t:.1f} s)"
         else:
-            res = best_first[cause]
-            if design_start and not explained and not (res is not None and ctx.explained(res)):
-                if cause not in refined_second:  # not foreseen above (cannot happen): fitted now
-                    second[cause] = _pool(variants[cause], [_screened_form((ctx, ctx.nominal, eff))
-                                                            for eff in variants[cause]])
-                    refine_second[cause] = _to_refine(second[cause], TOP_SECOND)
-                    refined_second[cause] = [_refined_form((ctx, fit, eff, pre, must_beat, NFEV_SECOND))
-                                             for _, eff, fit, pre in refine_second[cause]]
-                res = _best_refined(second[cause], refine_second[cause], refined_second[cause], must_beat, res)
-            seconds = ""
+            # once a cause explains the data to the noise, the others are fitted from the fitted baseline only
+            res, variants_tried[cause] = fit_cause(ctx, cause, baseline, must_beat=baseline.objective,
+                                                   from_nominal=distorted and not explained)
         if res is None:
             continue
-        if res.objective >= must_beat:
+        if res.objective >= baseline.objective:
             failed.append({"cause": cause, "cost": res.cost, "reason": "every start ended at or above the baseline cost"})
             log(f"{cause}: failed (cost {res.cost:.4g} >= baseline {baseline.cost:.4g})", progress)
             continue
         results[cause] = res
         log(f"{cause}: {res.structure or res.effects[0].label}: cost {res.cost:.4g}, gain "
-            f"{1 - res.cost / baseline.cost:.3f}, dBIC {baseline.bic - res.bic:.1f}{seconds}", progress)
-    return results, failed, {c: [t[1] for t in first[c]] for c in continuous}
+            f"{1 - res.cost / baseline.cost:.3f}, dBIC {baseline.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)",
+            progress)
+    return results, failed, variants_tried
