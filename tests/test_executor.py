@@ -377,6 +377,30 @@ def test_interrupt_message_counts_stored_runs(markers, tmp_path):
                                  f"run the same command again to resume")
 
 
+def test_abort_ends_the_pool_s_management_thread_before_returning(markers):
+    """After an abort (Ctrl-C) nothing of the pool is left running to race the interpreter's exit.
+
+    The pool's management thread closes its wake-up pipe once it sees the
+    workers gone, while the exit hook of ``concurrent.futures`` writes to that
+    pipe: left running, the two raced and printed "OSError: [Errno 9] Bad file
+    descriptor" after the one-line message, now and then on a loaded machine.
+    """
+    pool = ex._process_pool(1)
+    backend = ex._FuturesBackend(pool, owned=True, name="processes", workers=1)
+    future = backend.submit(counted_tasks(markers, 1, delay=30)[0])
+    t_end = time.monotonic() + 60
+    while not list(markers.glob("ran-*")) and time.monotonic() < t_end:  # the task has started in the worker
+        time.sleep(0.05)
+    t0 = time.monotonic()
+    backend.abort()
+    assert time.monotonic() - t0 < 10
+    manager = getattr(pool, "_executor_manager_thread", None)
+    assert manager is None or not manager.is_alive()
+    wakeup = getattr(pool, "_executor_manager_thread_wakeup", None)
+    assert wakeup is None or getattr(wakeup, "_closed", True)
+    assert future.done()
+
+
 # --------------------------------------------------------------------------- #
 # A real study (two-section, quick, cases 4 and 1): killed, resumed, run twice at once, reproducible
 # --------------------------------------------------------------------------- #
