@@ -5,18 +5,17 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from estimation._threads import single_threaded_blas
-
-# Under pytest-xdist (``-n 2``) every worker process shares the cores with the others: one BLAS thread each, set
-# before the test modules import numpy, and inherited by the commands the tests start. Multi-threaded OpenBLAS
-# on the small matrices of these problems spins idle threads for the cores the other worker uses.
-if os.environ.get("PYTEST_XDIST_WORKER"):
-    single_threaded_blas()
-
 import pytest
 
 from pris_cosim import ngspice
+from estimation._threads import single_threaded_blas
 from pris_cosim.datafiles import NETLISTS, REAL  # noqa: F401  (REAL: for the tests that import it)
+
+# Under pytest-xdist (``-n 2``) the worker processes share the cores: one BLAS thread each (numpy is loaded by now,
+# so threadpoolctl limits it; the variables set are inherited by the commands the tests start). Multi-threaded
+# OpenBLAS on the small matrices of these problems spins idle threads for the cores the other worker uses.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    single_threaded_blas()
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -69,7 +69,7 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     first = fit.fit_continued(x0, max_nfev=max_nfev)
     if first.objective <= good_enough or starts <= 0:
         if batch is not None:
-            batch.batch.cancel()
+            batch.cancel()
         return first
     short = (batch or _StartsFitted(fit, x0, starts, spread, max_nfev)).result()
     if short.objective >= first.objective:
@@ -105,6 +105,10 @@ class _StartsFitted:
         if self.aligned is not None:
             r = fit.residuals_batch(self.aligned[None])
             self.screened = np.concatenate([np.sum(r * r, axis=1), self.screened])
+
+    def cancel(self) -> None:
+        """Give the random starts up unfitted (the helper process is free for the next batch)."""
+        self.batch.cancel()
 
     def result(self) -> FitResult:
         """The best fit; of equal costs the first in the screened order."""
