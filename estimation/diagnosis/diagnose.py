@@ -59,7 +59,6 @@ Steps:
 
 from __future__ import annotations
 
-import itertools
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
@@ -85,7 +84,7 @@ from .forms import rechoose_forms
 from .realise import realise_extended
 from .result import Diagnosis
 from .section_fits import fit_missing_section, section_pairs
-from .single import effect_starts, single_causes
+from .single import single_causes, start_tails
 from .unmerge import missing_modes, resolved_points
 from .context import (MAX_BASELINE_RMS, NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR, UNMERGE_ABOVE_FLOOR, Context,
                       log)
@@ -552,7 +551,8 @@ def _baseline_refitted(args: tuple[Context, Circuit, int]) -> FitResult | None:
 
 def _drop_redundant(ctx: Context, current: FitResult, chosen: list[str], steps: list[dict[str, Any]],
                     min_delta_bic: float, progress: bool) -> tuple[FitResult, list[str], list[dict[str, Any]]]:
-    """Refit without each named effect in turn (warm start); drop it when the BIC does not worsen by ``min_delta_bic``.
+    """Refit without each named effect in turn (:func:`_without_effect`); drop it when the BIC does not worsen by
+    ``min_delta_bic``.
 
     Structural causes (a missing section) are kept. A core loss that added its resistor (the baseline had no core
     loop) is dropped with it.
@@ -562,7 +562,7 @@ def _drop_redundant(ctx: Context, current: FitResult, chosen: list[str], steps: 
         changed = False
         # the model without each effect, shared with the helper process (:mod:`.cores`); read in order, up to the
         # first effect dropped
-        without = shared_map(_without_effect, [(ctx, current, j) for j in range(len(current.effects))])
+        without = shared_map(_without_effect, [(ctx, current, j, min_delta_bic) for j in range(len(current.effects))])
         for j, (eff, res) in enumerate(zip(current.effects, without)):
             if eff.cause in STRUCTURAL or res is None:  # (None: the network degenerates without it: it stays)
                 continue
@@ -583,10 +583,13 @@ def _drop_redundant(ctx: Context, current: FitResult, chosen: list[str], steps: 
     return current, chosen, steps
 
 
-def _without_effect(args: tuple[Context, FitResult, int]) -> FitResult | None:
-    """``current`` refitted without its effect ``j`` (warm start; :func:`_drop_redundant`); None for a structural
-    cause or when the network degenerates. A core loss that added its resistor is removed with it."""
-    ctx, current, j = args
+def _without_effect(args: tuple[Context, FitResult, int, float]) -> FitResult | None:
+    """``current`` refitted without its effect ``j`` (:func:`_drop_redundant`); None for a structural cause or when
+    the network degenerates. A core loss that added its resistor is removed with it.
+
+    Warm-started; when that refit is worse than ``current`` by ``min_delta_bic`` or more, also from each remaining
+    effect's start grid (the best of all is returned)."""
+    ctx, current, j, min_delta_bic = args
     eff = current.effects[j]
     if eff.cause in STRUCTURAL:
         return None
@@ -597,13 +600,26 @@ def _without_effect(args: tuple[Context, FitResult, int]) -> FitResult | None:
             ctx.nominal is not None and ctx.nominal.has_element("Rcore")):
         circuit = replace(circuit, elements=[e for e in circuit.elements if e.key != "rcore"])
     keep = [e for i, e in enumerate(current.effects) if i != j]
-    tail = np.concatenate([current.x[nc + offsets[i]: nc + offsets[i + 1]]
-                           for i in range(len(current.effects)) if i != j])
+    tails = [list(current.x[nc + offsets[i]: nc + offsets[i + 1]]) for i in range(len(current.effects)) if i != j]
     try:
         fit = ctx.fit(circuit, keep, couplings=current.couplings)
-        return fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-6)
+        best = fit.fit(x0s=np.concatenate([np.zeros(fit.nc)] + tails)[None], grid=False, max_nfev=60, tol=1e-6)
     except _CANDIDATE_FAILURES:
         return None
+    if best.bic - current.bic < min_delta_bic:
+        return best
+    # kept from the warm start: the others' parameters were fitted beside it and may sit where it was needed (a
+    # skin effect's corner beside a core loss that took part of its rise). Each other effect from its start grid
+    for k, eff_k in enumerate(keep):
+        rows = [np.concatenate([np.zeros(fit.nc)] + tails[:k] + [t] + tails[k + 1:])
+                for t in start_tails(ctx, fit, eff_k)]
+        try:
+            res = fit.fit(x0s=np.array(rows), grid=False, max_nfev=60, tol=1e-6, keep_starts=3)
+        except _CANDIDATE_FAILURES:
+            continue
+        if res.objective < best.objective:
+            best = res
+    return best
 
 
 def _topology(circuit: Circuit) -> list[tuple[str, str, tuple[str, ...]]]:
@@ -622,10 +638,7 @@ def _extend(ctx: Context, current: FitResult, cause: str, single: FitResult, var
     best = None
     for eff in order:
         fit = ctx.fit(circuit, list(current.effects) + [eff], couplings=current.couplings)
-        grid = (effect_starts(ctx, fit, eff) or
-                [dict(zip([p.name for p in eff.parameters], vals)) for vals in itertools.product(
-                    *[p.starts or (np.sqrt(p.lower * p.upper),) for p in eff.parameters])])
-        tails = [[np.log(g[p.name]) if p.log else g[p.name] for p in eff.parameters] for g in grid]
+        tails = start_tails(ctx, fit, eff)
         if eff is single.effects[0]:
             tails.insert(0, list(single.x[current_nc(single):]))
         # from the current model's values and (with a design prior) from the design values: the current values

@@ -19,9 +19,12 @@ at its place in the catalogue's order.
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Sequence
 from typing import Any
+
+import numpy as np
 
 from pris_cosim.circuit import Circuit
 
@@ -44,6 +47,19 @@ def effect_starts(ctx: Context, fit: FrequencyFit, effect: Effect) -> list[dict[
     if isinstance(effect, CoreLoss):
         return effect.starts(fit.circuit, fit.circuit.resolve(check=False), ctx.scale, float(ctx.f[0]), float(ctx.f[-1]))
     return None
+
+
+def start_grid(ctx: Context, fit: FrequencyFit, effect: Effect) -> list[dict[str, float]]:
+    """The start grid of ``effect``'s parameters on ``fit``'s circuit: :func:`effect_starts`, else every combination
+    of the parameters' own starts (the geometric middle of the bounds for a parameter without any)."""
+    return effect_starts(ctx, fit, effect) or [
+        dict(zip([p.name for p in effect.parameters], vals))
+        for vals in itertools.product(*[p.starts or (np.sqrt(p.lower * p.upper),) for p in effect.parameters])]
+
+
+def start_tails(ctx: Context, fit: FrequencyFit, effect: Effect) -> list[list[float]]:
+    """:func:`start_grid` as parameter vectors (log-scaled where the parameter is)."""
+    return [[np.log(g[p.name]) if p.log else g[p.name] for p in effect.parameters] for g in start_grid(ctx, fit, effect)]
 
 
 def _screened_form(args: tuple[Context, Circuit, Effect]) -> tuple[FrequencyFit | None, FitResult | None]:
