@@ -41,6 +41,22 @@ def test_clean_cascade_no_false_alarm():
 
 
 @pytest.mark.slow
+@pytest.mark.long
+def test_skin_effect_and_missing_section_without_a_core_loss_beside_them():
+    """Seven sections, the last two merged in the netlist, and a thesis-like skin effect (its own scale: the rise
+    starts at f_s / 20). Forward selection names core loss before the section (the split is refused beside the skin
+    effect alone, 2.6x the noise); with the section, the skin effect refitted from its own starts makes the core
+    loss redundant, and the backward check drops it."""
+    case = one_port_case(("skin-effect", "missing-section"), 101)
+    assert case.truth["skin"]["kind"] == "thesis" and case.truth["merged_sections"] == (6, 7)
+    d = _diagnose(case)
+    assert sorted(d.causes) == ["missing-section", "skin-effect"], d.steps
+    assert any(s.get("dropped") and s["cause"] == "core-loss" for s in d.steps), d.steps
+    assert "section 6 " in d.best.structure, d.best.structure
+    assert d.best.cost <= 1.25 * d.noise["cost"]
+
+
+@pytest.mark.slow
 def test_cli_json_has_steps_and_noise_floor(tmp_path):
     case = one_port_case("skin-effect", 2, sections=4)
     net = tmp_path / "cascade.cir"
