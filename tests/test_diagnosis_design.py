@@ -151,3 +151,33 @@ def test_one_doubled_capacitance_located_where_the_prior_spread_it():
     assert [x["name"] for x in d.drift] == ["C5"] and 1.8 < d.drift[0]["ratio"] < 2.2, d.drift
     assert d.baseline.objective <= 1.25 * d.noise["cost"]
     assert any("| C5 |" in line for line in drift_lines(d.as_json()))
+
+
+def test_drift_on_a_value_in_parallel_names_its_partners_and_their_combination():
+    """A section ending at ground: its capacitance and the node's capacitance to ground are in parallel, and the
+    terminals see only their sum. Combinations by hand: capacitances add, resistances combine as conductances."""
+    from estimation.diagnosis.drift import with_parallel
+    from estimation.diagnosis.report import drift_lines
+
+    circuit = parse_netlist("* end section\nR1 n1 x1 2\nL1 x1 n2 1m\nC1 n1 n2 1n\nCg1 n1 0 1n\n"
+                            "R2 n2 x2 3\nL2 x2 0 2m\nC2 n2 0 0.8n\nCg2 n2 gnd 0.7n\nRp n2 0 1k\nRq 0 n2 4k\n"
+                            "K1 L1 L2 0.5\n")
+    design = {"c2": 0.8e-9, "cg2": 0.7e-9, "rp": 1e3, "rq": 4e3, "c1": 1e-9, "l2": 2e-3}
+    values = {"C2": 0.8e-9, "Cg2": 1.9e-9, "Rp": 1e3, "Rq": 9e3, "C1": 2.2e-9, "L2": 4e-3}
+    drift = [{"name": "Cg2", "design": 0.7e-9, "fitted": 1.9e-9, "ratio": 1.9 / 0.7},
+             {"name": "Rq", "design": 4e3, "fitted": 9e3, "ratio": 2.25},
+             {"name": "C1", "design": 1e-9, "fitted": 2.2e-9, "ratio": 2.2},
+             {"name": "L2", "design": 2e-3, "fitted": 4e-3, "ratio": 2.0}]
+    out = with_parallel(circuit, values, design, drift)
+    cg2, rq, c1, l2 = out
+    assert cg2["parallel"] == ["C2"]
+    assert cg2["combined"]["design"] == pytest.approx(1.5e-9) and cg2["combined"]["fitted"] == pytest.approx(2.7e-9)
+    assert cg2["combined"]["ratio"] == pytest.approx(1.8)
+    assert rq["parallel"] == ["Rp"]
+    assert rq["combined"]["design"] == pytest.approx(800.0)  # 1k || 4k
+    assert rq["combined"]["fitted"] == pytest.approx(900.0)  # 1k || 9k
+    assert "parallel" not in c1  # C1 spans n1-n2, Cg1 n1-ground: not in parallel
+    assert "parallel" not in l2  # a coupled inductor is not combined
+    assert drift[0].get("parallel") is None  # the input is not changed
+    text = "\n".join(drift_lines({"tolerance": 0.2, "drift": out}))
+    assert "Cg2 is in parallel with C2" in text and "x1.8" in text

@@ -10,6 +10,7 @@ from typing import Any
 from pris_cosim.cli_sim import si_value
 
 from .prior import DEFAULT_TOLERANCE
+from .report import parallel_note
 
 
 def register(subparsers: Any) -> None:
@@ -142,6 +143,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             print(f"causes: {' + '.join(out['causes'])}")
         for d in out.get("drift") or []:
             print(f"  drift {d['name']}: design {d['design']:.4g}, fitted {d['fitted']:.4g} (x{d['ratio']:.3g})")
+            if d.get("parallel"):
+                print(f"    ({parallel_note(d)})")
         for c in out["candidates"]:
             print(f"  {c['cause']:<24} cost {c['cost']:.4g}  gain {c['gain']:.3f}")
         if args.report:

@@ -76,12 +76,13 @@ from .cores import helper_available, shared_map
 from .catalogue import FREQUENCY_CAUSES, Effect
 from .evidence import band_table, localise, noise_floor, noise_weights, resonance_comparison, unexplained_bands
 from .fit import CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit, current_nc, significant
-from .drift import located_drift, relaxed_drift
+from .drift import located_drift, relaxed_drift, with_parallel
 from .converge import converged
 from .holdout import held_out_gain
 from .prior import DEFAULT_TOLERANCE, design_prior
 from .forms import rechoose_forms
 from .realise import realise_extended
+from .report import parallel_note
 from .result import Diagnosis
 from .section_fits import fit_missing_section, section_pairs
 from .single import single_causes, start_tails
@@ -332,12 +333,16 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     final = extended or baseline
     diag.tolerance = float(tolerance) if prior is not None else float("inf")
     diag.drift = relaxed_drift(ctx, final, lambda m: log(m, progress))
-    diag.baseline_drift = ctx.drift(baseline)
+    diag.baseline_drift = with_parallel(baseline.circuit, baseline.values, prior.design, ctx.drift(baseline)) \
+        if prior is not None else []
     diag.drift_alternatives = list(getattr(final, "drift_alternatives", []))
     if diag.drift:
         log("values beyond the design tolerance in the final model: "
              + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift),
              progress)
+        for d in diag.drift:
+            if d.get("parallel"):
+                log(parallel_note(d), progress)
     diag.unexplained = unexplained_bands(f, {n: e * weights[n] if n in weights else e for n, e in final.errors.items()},
                                          floor["per_response"])
     diag.evidence = {

@@ -10,11 +10,13 @@ the tolerance.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
+
+from pris_cosim.circuit import Circuit, node_name
 
 from .align import aligned_start, resonance_mismatch
 from .cores import shared_map
@@ -84,7 +86,37 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
             log(message)
         if d is not None:
             kept.append(d)
-    return kept
+    return with_parallel(current.circuit, current.values, ctx.prior.design, kept)
+
+
+def with_parallel(circuit: Circuit, values: Mapping[str, float], design: Mapping[str, float],
+                  drift: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``drift`` with, for each value that has others of its kind across the same two nodes, ``parallel`` (their
+    names) and ``combined`` (``design``, ``fitted`` and ``ratio`` of the combination: capacitances add, resistances
+    and uncoupled inductances combine as conductances).
+
+    The terminals see only the combination: a capacitance across a section that ends at ground is in parallel with
+    that node's capacitance to ground, and a change of either fits the data equally well.
+    """
+    coupled = {n.lower() for e in circuit.elements if e.kind == "K" for n in e.nodes}
+    fitted = {k.lower(): float(v) for k, v in values.items()}
+    out = []
+    for d in drift:
+        d = dict(d)
+        el = circuit.element(d["name"]) if circuit.has_element(d["name"]) else None
+        if el is not None and el.kind in "RLC" and el.key not in coupled:
+            ends = {node_name(n) for n in el.nodes}
+            group = [e for e in circuit.elements if e.kind == el.kind and e.key != el.key and e.key not in coupled
+                     and {node_name(n) for n in e.nodes} == ends]
+            if group and all(e.key in fitted and design.get(e.key) for e in group):
+                combine = (lambda xs: float(sum(xs))) if el.kind == "C" else (lambda xs: 1 / sum(1 / x for x in xs))
+                both = {"design": combine([d["design"]] + [design[e.key] for e in group]),
+                        "fitted": combine([d["fitted"]] + [fitted[e.key] for e in group])}
+                both["ratio"] = both["fitted"] / both["design"]
+                d["parallel"] = [e.name for e in group]
+                d["combined"] = both
+        out.append(d)
+    return out
 
 
 def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple[dict[str, Any] | None, str]:

@@ -71,6 +71,13 @@ def _fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
+def parallel_note(d: dict) -> str:
+    """One drifted value's parallel partners: the terminals see only their combination (no full stop)."""
+    c = d["combined"]
+    return (f"{d['name']} is in parallel with {', '.join(d['parallel'])}: the data tell only their combination, "
+            f"{_fmt(c['design'])} -> {_fmt(c['fitted'])} (x{c['ratio']:.3g}), not which of them is off")
+
+
 def drift_lines(data: dict) -> list[str]:
     """Markdown: the design tolerance and the values the final fit moved beyond it (the drift table)."""
     tol = data.get("tolerance", float("inf"))
@@ -86,6 +93,9 @@ def drift_lines(data: dict) -> list[str]:
                   "| value | design | fitted | ratio |", "|---|---|---|---|"]
         lines += [f"| {d['name']} | {_fmt(d['design'])} | {_fmt(d['fitted'])} | {d['ratio']:.3g} |" for d in drift]
         lines.append("")
+        lines += [parallel_note(d) + "." for d in drift if d.get("parallel")]
+        if any(d.get("parallel") for d in drift):
+            lines.append("")
         alt = data.get("drift_alternatives") or []
         if alt:
             lines += ["The data are explained as well by one of these values off instead (one at a time; the "
