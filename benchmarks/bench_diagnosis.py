@@ -10,6 +10,12 @@ own, hidden effects in other forms than the catalogue's: see there):
   single causes, effects on one winding only (LV or HV), compound cases;
 - clean cases at 1 % noise (a false alarm is any named cause).
 
+The design-anchored family uses, for each case, the first draw whose
+hidden causes show above the noise (:mod:`design_draws`, the reference
+solver's check run on every case before the diagnosis sees it: a draw
+whose effect the design's values absorb within twice the tolerance is
+replaced by the next draw of its seed).
+
 A missing section is also labelled *detectable* or not, independently of
 the diagnosis (:mod:`detectability`: the baseline's structure fitted to the
 truth's sections without noise by the reference solver; undetectable when
@@ -53,7 +59,7 @@ os.environ["PYTHONPATH"] = os.pathsep.join([str(HERE.parent), str(HERE), str(TES
 
 
 def run_case(kind: str, causes: list[str], seed: int, noise: float = 0.003, group: str | None = None,
-             sections: int | None = None, drift: bool = False) -> dict:
+             sections: int | None = None, drift: bool = False, draw: int = 0) -> dict:
     """Generate one hidden-effect case and diagnose it (top-level so worker processes can run it)."""
     import hidden_cases as hc
 
@@ -64,7 +70,7 @@ def run_case(kind: str, causes: list[str], seed: int, noise: float = 0.003, grou
     from pris_cosim.netlist import parse_netlist
 
     if kind == "design":
-        case = hc.design_case(tuple(causes), seed, noise=noise, drift=drift)
+        case = hc.design_case(tuple(causes), seed, noise=noise, drift=drift, draw=draw)
         t = time.perf_counter()
         d = diagnose_frequency(case.frequency_hz, case.measured, circuit=parse_netlist(case.baseline_netlist),
                                port=case.port, progress=False, tolerance=0.2)
@@ -155,10 +161,23 @@ def _jacobian_from_environment() -> None:
 DESIGN_SEEDS = 7
 
 
-def design_cases(quick: bool) -> list[dict]:
-    """The design-anchored family (:func:`hidden_cases.design_case`)."""
-    return [{"kind": "design", "causes": list(c) or ["none"], "seed": 700 + s, "drift": drift}
-            for c, drift in DESIGN_FAMILY for s in range(1 if quick else DESIGN_SEEDS)]
+def design_cases(quick: bool, draws: bool = True) -> list[dict]:
+    """The design-anchored family (:func:`hidden_cases.design_case`).
+
+    With ``draws``, a case whose first draw hides a cause below the noise
+    uses the draw that :mod:`design_draws` found to show it (``draw`` in the
+    case, ``-dN`` in its id).
+    """
+    out = [{"kind": "design", "causes": list(c) or ["none"], "seed": 700 + s, "drift": drift}
+           for c, drift in DESIGN_FAMILY for s in range(1 if quick else DESIGN_SEEDS)]
+    if draws:
+        from design_draws import load_draws
+
+        used = load_draws()
+        for c in out:
+            if used.get(_task_id(c)):
+                c["draw"] = used[_task_id(c)]
+    return out
 
 
 def named_right(r: dict, detectable_only: bool = False) -> bool:
@@ -212,6 +231,8 @@ def _task_id(c: dict) -> str:
         parts.append(f"n{c['noise']}")
     if c.get("drift"):
         parts.append("drift")
+    if c.get("draw"):
+        parts.append(f"d{c['draw']}")
     return "-".join(parts)
 
 

@@ -42,7 +42,7 @@ def _responses(net: rs.Net, kind: str, f: np.ndarray) -> dict[str, np.ndarray]:
 
 def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target: str = "sections",
                       bound: float = float(np.log(100.0)), free: tuple[str, ...] = (), structure: str = "baseline",
-                      keep: str | None = None) -> dict[str, float]:
+                      keep: str | None = None, early: bool = False) -> dict[str, float]:
     """Fit of the baseline's structure to the truth (no noise).
 
     Parameters
@@ -75,6 +75,9 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
         of a one-port or design case), values free, so that
         ``target="truth"`` asks whether the compound's other effect can be
         told apart once this one is in the model.
+    early : bool
+        Stop at the first start that reaches the noise (the answer,
+        undetectable, is then known; ``cost`` is that start's, not the best).
 
     Returns
     -------
@@ -126,5 +129,39 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
                             max_nfev=max_nfev, x_scale="jac")
         e = errors(start, sol.x)
         best = min(best, max(float(np.mean(np.abs(v) ** 2)) for v in e.values()))
+        if early and best <= 2 * case.noise ** 2:
+            break
     noise = 2 * case.noise ** 2
     return {"cost": best, "noise": noise, "detectable": bool(best > noise)}
+
+
+def effects_shown(case, bound: float = 2 * float(np.log(1.2)), early: bool = True) -> dict[str, dict[str, float]]:
+    """Does every hidden cause of a design case show above the noise? One :func:`best_baseline_fit` per cause.
+
+    A missing section: the design's structure fitted to the truth's sections;
+    a single effect: the design's structure fitted to the whole truth; an
+    effect beside a missing section: the truth's sections fitted to the whole
+    truth; each of two effects: the truth's sections with the other effect
+    (its own form and parameters) fitted to the whole truth. Values within
+    ``bound`` in log (twice the design tolerance), the drifted value free.
+
+    Returns
+    -------
+    dict
+        Cause -> :func:`best_baseline_fit`'s answer (``detectable``).
+    """
+    box = {"bound": bound, "free": tuple(case.truth.get("drift", ())), "early": early}
+    causes = [c for c in case.causes if c != "none"]
+    effects = [c for c in causes if c != "missing-section"]
+    out: dict[str, dict[str, float]] = {}
+    if "missing-section" in causes:
+        out["missing-section"] = best_baseline_fit(case, **box)
+        for c in effects:
+            out[c] = best_baseline_fit(case, target="truth", structure="sections", **box)
+    elif len(effects) == 1:
+        out[effects[0]] = best_baseline_fit(case, target="truth", **box)
+    else:
+        for c in effects:
+            other = next(x for x in effects if x != c)
+            out[c] = best_baseline_fit(case, target="truth", structure="sections", keep=other, **box)
+    return out

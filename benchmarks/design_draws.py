@@ -1,0 +1,111 @@
+"""Which draw of each design-anchored case shows its hidden causes above the noise.
+
+A design case (:func:`hidden_cases.design_case`) hides one or two causes in
+a winding whose values are the design's within 10 %. Some draws hide an
+effect that no diagnosis can see: the design's own structure, its values
+within twice the design tolerance, reproduces the truth within the noise (a
+skin effect of the Bessel form at a few tens of kHz is absorbed by the
+series resistances and inductances). Such a draw tests nothing but the
+noise, so the benchmark replaces it with the next draw of the same seed.
+
+For every case of :data:`bench_diagnosis.DESIGN_FAMILY` that hides a
+cause, draws 0, 1, 2, ... are checked with
+:func:`detectability.effects_shown` (the reference solver, no code of the
+diagnosis) until every hidden cause of the draw shows; the draw used is
+written to ``benchmarks/results/design_draws.json``, which
+:mod:`bench_diagnosis` reads. Clean and drift-only cases hide nothing and
+keep draw 0. Every case is checked, whatever the diagnosis made of it.
+
+Run: ``python benchmarks/design_draws.py [--workers 2] [--out results/design_draws]``
+(about 70 minutes on two cores; finished cases are kept in ``--out``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+for p in (str(HERE), str(HERE.parent / "tests"), str(HERE.parent)):
+    if p not in sys.path:
+        sys.path.insert(0, p)
+
+#: Draws tried per case before giving up (the case then keeps draw 0 and is reported).
+MAX_DRAWS = 6
+
+#: Where the draws used are written (read by :mod:`bench_diagnosis`).
+DRAWS_FILE = HERE / "results" / "design_draws.json"
+
+
+def check_case(causes: list[str], seed: int, drift: bool) -> dict:
+    """Walk the draws of one case until every hidden cause shows (top-level for worker processes)."""
+    import hidden_cases as hc
+    from detectability import effects_shown
+
+    tried = []
+    for draw in range(MAX_DRAWS):
+        case = hc.design_case(tuple(causes), seed, drift=drift, draw=draw)
+        shown = effects_shown(case)
+        tried.append({c: {"cost": v["cost"], "noise": v["noise"], "detectable": v["detectable"]}
+                      for c, v in shown.items()})
+        if all(v["detectable"] for v in shown.values()):
+            return {"draw": draw, "tried": tried}
+    return {"draw": None, "tried": tried}
+
+
+def load_draws(path: Path = DRAWS_FILE) -> dict[str, int]:
+    """Task id -> draw to use (draw 0 for a case not listed)."""
+    if not path.exists():
+        return {}
+    doc = json.loads(path.read_text())
+    return {k: int(v) for k, v in doc.get("data", {}).get("draws", {}).items()}
+
+
+def main() -> None:
+    from bench_diagnosis import _task_id, design_cases
+    from estimation.executor import ResultsStore, Task, run_tasks
+    from results_io import table, write_results
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="results/design_draws")
+    ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--only", nargs="+", default=None, metavar="TEXT", help="cases whose id contains one of these")
+    args = ap.parse_args()
+    todo = [c for c in design_cases(quick=False, draws=False) if c["causes"] != ["none"]]
+    if args.only:
+        todo = [c for c in todo if any(t in _task_id(c) for t in args.only)]
+    tasks = [Task(_task_id(c), check_case, {"causes": c["causes"], "seed": c["seed"], "drift": c["drift"]})
+             for c in todo]
+    results = run_tasks(tasks, store=ResultsStore(args.out), workers=args.workers, progress=True, on_error="continue")
+    ids = [t.id for t in tasks]
+    done = {i: r for i, r in zip(ids, results) if isinstance(r, dict)}
+    old = json.loads(DRAWS_FILE.read_text()).get("data", {}) if DRAWS_FILE.exists() else {}
+    draws = {**old.get("draws", {}), **{i: r["draw"] for i, r in done.items() if r["draw"] not in (None, 0)}}
+    for i, r in done.items():  # a case now at draw 0 (or never shown) leaves the table
+        if r["draw"] in (None, 0):
+            draws.pop(i, None)
+    checked = {**old.get("checked", {}), **{i: r["tried"] for i, r in done.items()}}
+    rows = []
+    for i in sorted(checked):
+        tried = checked[i]
+        for k, t in enumerate(tried):
+            rows.append([i, k, ", ".join(f"{c} {v['cost'] / v['noise']:.3g}" for c, v in t.items()),
+                         "used" if draws.get(i, 0) == k and all(v["detectable"] for v in t.values()) else "replaced"
+                         if not all(v["detectable"] for v in t.values()) else ""])
+    replaced = sum(1 for i in checked if draws.get(i, 0) > 0)
+    never = [i for i, r in done.items() if r["draw"] is None]
+    out = write_results("design_draws", [table(
+        "Design-anchored draws: each hidden cause's best fit without it, over the noise (below 1: invisible)",
+        ["case", "draw", "cost / noise per cause", "outcome"], rows)],
+        summary=f"{len(checked)} design cases with hidden causes checked, {replaced} draws replaced"
+                + (f", {len(never)} never shown" if never else ""))
+    doc = json.loads(out.read_text())
+    doc["data"] = {"draws": draws, "checked": checked}
+    out.write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"{len(checked)} cases checked, {replaced} replaced: {sorted(k for k in draws)}; never shown: {never}")
+
+
+if __name__ == "__main__":
+    main()
