@@ -72,15 +72,21 @@ def main() -> None:
     ap.add_argument("--out", default="results/design_draws")
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--only", nargs="+", default=None, metavar="TEXT", help="cases whose id contains one of these")
+    ap.add_argument("--collect", action="store_true",
+                    help="run nothing: write the draws of the cases already checked in --out")
     args = ap.parse_args()
     todo = [c for c in design_cases(quick=False, draws=False) if c["causes"] != ["none"]]
     if args.only:
         todo = [c for c in todo if any(t in _task_id(c) for t in args.only)]
     tasks = [Task(_task_id(c), check_case, {"causes": c["causes"], "seed": c["seed"], "drift": c["drift"]})
              for c in todo]
-    results = run_tasks(tasks, store=ResultsStore(args.out), workers=args.workers, progress=True, on_error="continue")
-    ids = [t.id for t in tasks]
-    done = {i: r for i, r in zip(ids, results) if isinstance(r, dict)}
+    if args.collect:
+        stored = {p.stem: json.loads(p.read_text()).get("result") for p in (Path(args.out) / "runs").glob("*.json")}
+        done = {t.id: stored[t.id] for t in tasks if isinstance(stored.get(t.id), dict)}
+    else:
+        results = run_tasks(tasks, store=ResultsStore(args.out), workers=args.workers, progress=True,
+                            on_error="continue")
+        done = {t.id: r for t, r in zip(tasks, results) if isinstance(r, dict)}
     old = json.loads(DRAWS_FILE.read_text()).get("data", {}) if DRAWS_FILE.exists() else {}
     draws = {**old.get("draws", {}), **{i: r["draw"] for i, r in done.items() if r["draw"] not in (None, 0)}}
     for i, r in done.items():  # a case now at draw 0 (or never shown) leaves the table
