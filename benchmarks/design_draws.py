@@ -96,10 +96,12 @@ def main() -> None:
     rows = []
     for i in sorted(checked):
         tried = checked[i]
+        shown = any(all(v["detectable"] for v in t.values()) for t in tried)
         for k, t in enumerate(tried):
-            rows.append([i, k, ", ".join(f"{c} {v['cost'] / v['noise']:.3g}" for c, v in t.items()),
-                         "used" if draws.get(i, 0) == k and all(v["detectable"] for v in t.values()) else "replaced"
-                         if not all(v["detectable"] for v in t.values()) else ""])
+            visible = all(v["detectable"] for v in t.values())
+            outcome = ("used" if draws.get(i, 0) == k and visible else "replaced" if visible is False and shown
+                       else f"used: no draw of {len(tried)} shows every cause" if k == 0 else "not shown")
+            rows.append([i, k, ", ".join(f"{c} {v['cost'] / v['noise']:.3g}" for c, v in t.items()), outcome])
     replaced = sum(1 for i in checked if draws.get(i, 0) > 0)
     never = [i for i, r in done.items() if r["draw"] is None]
     out = write_results("design_draws", [table(

@@ -23,6 +23,7 @@ def _run(*args: str, cwd) -> dict:
     return json.loads(out.stdout)
 
 
+@pytest.mark.slow
 @pytest.mark.long
 @pytest.mark.xfail(reason="core loss is refused beside a magnetising change in its causal form, whose phase is a "
                           "loss (gain 0.044 of the 0.2 a further cause needs): skin effect + magnetising change named, "
