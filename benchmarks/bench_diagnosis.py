@@ -86,12 +86,12 @@ def run_case(kind: str, causes: list[str], seed: int, noise: float = 0.003, grou
     wall = time.perf_counter() - t
     # can the baseline's structure reproduce the truth within the noise at all? (a missing section always; another
     # single cause when nothing was named)
-    from detectability import best_baseline_fit
+    from detectability import DESIGN_BOUND, best_baseline_fit
 
     section = None
     if kind == "design":
         # within twice the tolerance (beyond it a fit is drift, not an explanation); the drifted value free
-        box = {"bound": 2 * float(np.log(1.2)), "free": tuple(case.truth.get("drift", ()))}
+        box = {"bound": DESIGN_BOUND, "free": tuple(case.truth.get("drift", ()))}
         if "missing-section" in causes:
             section = best_baseline_fit(case, **box)
         elif len(causes) == 1 and causes[0] != "none" and not d.causes:

@@ -81,39 +81,31 @@ def main() -> None:
     tasks = [Task(_task_id(c), check_case, {"causes": c["causes"], "seed": c["seed"], "drift": c["drift"]})
              for c in todo]
     if args.collect:
-        stored = {p.stem: json.loads(p.read_text()).get("result") for p in (Path(args.out) / "runs").glob("*.json")}
+        runs = Path(args.out) / "runs"
+        stored = {p.stem: json.loads(p.read_text()).get("result") for p in runs.glob("*.json")}
         done = {t.id: stored[t.id] for t in tasks if isinstance(stored.get(t.id), dict)}
     else:
         results = run_tasks(tasks, store=ResultsStore(args.out), workers=args.workers, progress=True,
                             on_error="continue")
         done = {t.id: r for t, r in zip(tasks, results) if isinstance(r, dict)}
     old = json.loads(DRAWS_FILE.read_text()).get("data", {}) if DRAWS_FILE.exists() else {}
-    draws = {**old.get("draws", {}), **{i: r["draw"] for i, r in done.items() if r["draw"] not in (None, 0)}}
-    for i, r in done.items():  # a case now at draw 0 (or never shown) leaves the table
-        if r["draw"] in (None, 0):
-            draws.pop(i, None)
     checked = {**old.get("checked", {}), **{i: r["tried"] for i, r in done.items()}}
+    shows = {i: [all(v["detectable"] for v in t.values()) for t in tried] for i, tried in checked.items()}
+    # the draw used: the first that shows every cause (draw 0 when none does)
+    draws = {i: s.index(True) for i, s in shows.items() if True in s and s.index(True) > 0}
+    never = sorted(i for i, s in shows.items() if True not in s)
     rows = []
     for i in sorted(checked):
-        tried = checked[i]
-        shown = any(all(v["detectable"] for v in t.values()) for t in tried)
-        for k, t in enumerate(tried):
-            visible = all(v["detectable"] for v in t.values())
-            outcome = ("used" if draws.get(i, 0) == k and visible else "replaced" if visible is False and shown
-                       else f"used: no draw of {len(tried)} shows every cause" if k == 0 else "not shown")
+        for k, t in enumerate(checked[i]):
+            outcome = ("used" if k == draws.get(i, 0) and shows[i][k] else "replaced" if i in draws
+                       else f"used: no draw of {len(checked[i])} shows every cause" if k == 0 else "not shown")
             rows.append([i, k, ", ".join(f"{c} {v['cost'] / v['noise']:.3g}" for c, v in t.items()), outcome])
-    replaced = sum(1 for i in checked if draws.get(i, 0) > 0)
-    never = [i for i, r in done.items() if r["draw"] is None]
-    out = write_results("design_draws", [table(
+    write_results("design_draws", [table(
         "Design-anchored draws: each hidden cause's best fit without it, over the noise (below 1: invisible)",
         ["case", "draw", "cost / noise per cause", "outcome"], rows)],
-        summary=f"{len(checked)} design cases with hidden causes checked, {replaced} draws replaced"
-                + (f", {len(never)} never shown" if never else ""))
-    doc = json.loads(out.read_text())
-    doc["data"] = {"draws": draws, "checked": checked}
-    out.write_text(json.dumps(doc, indent=1) + "\n")
-    print(f"{len(checked)} cases checked, {replaced} replaced: {sorted(k for k in draws)}; never shown: {never}")
-
+        summary=f"{len(checked)} design cases with hidden causes checked, {len(draws)} draws replaced"
+                + (f", {len(never)} never shown" if never else ""), data={"draws": draws, "checked": checked})
+    print(f"{len(checked)} cases checked, {len(draws)} replaced: {sorted(draws)}; never shown: {never}")
 
 if __name__ == "__main__":
     main()

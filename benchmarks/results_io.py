@@ -44,7 +44,7 @@ def table(title: str, columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> 
 
 def write_results(name: str, tables: Sequence[dict[str, Any]], summary: str = "",
                   figures: dict[str, dict[str, Any]] | None = None,
-                  path: str | os.PathLike[str] | None = None) -> Path:
+                  path: str | os.PathLike[str] | None = None, data: Any = None) -> Path:
     """Write one benchmark's results (atomically) and return the file's path.
 
     Parameters
@@ -59,6 +59,8 @@ def write_results(name: str, tables: Sequence[dict[str, Any]], summary: str = ""
         Headline numbers ``{name: {"value": float, "unit": str}}``.
     path : path-like, optional
         Where to write instead of ``benchmarks/results/<name>.json``.
+    data : object, optional
+        Free-form result kept beside the tables (``data``; see :func:`write_raw`).
     """
     out = Path(path) if path is not None else RESULTS_DIR / f"{name}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -73,6 +75,8 @@ def write_results(name: str, tables: Sequence[dict[str, Any]], summary: str = ""
         "tables": list(tables),
         "figures": figures or {},
     }
+    if data is not None:
+        doc["data"] = json.loads(json.dumps(data, default=_plain))
     tmp = out.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(doc, indent=1, default=_plain) + "\n")
     tmp.replace(out)
@@ -92,13 +96,7 @@ def write_raw(name: str, data: Any, summary: str = "") -> Path:
     summary : str, optional
         One line describing what was measured.
     """
-    out = write_results(name, tables=[], summary=summary)
-    doc = json.loads(out.read_text())
-    doc["data"] = json.loads(json.dumps(data, default=_plain))
-    tmp = out.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(doc, indent=1) + "\n")
-    tmp.replace(out)
-    return out
+    return write_results(name, tables=[], summary=summary, data=data)
 
 
 def _plain(x: Any) -> Any:

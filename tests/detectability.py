@@ -110,7 +110,7 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
 
     big = float(np.log(100.0))
     hi = np.array([big if n.lower() in {x.lower() for x in free} else bound for n in names])
-    best = np.inf
+    best, noise = np.inf, 2 * case.noise ** 2
     zero = np.zeros(len(names))
     starts = [(home, zero)]
     if structure != "sections" and case.nets["baseline"].elements != case.nets["merged"].elements:
@@ -129,13 +129,16 @@ def best_baseline_fit(case, max_nfev: int = 400, random_starts: int = 12, target
                             max_nfev=max_nfev, x_scale="jac")
         e = errors(start, sol.x)
         best = min(best, max(float(np.mean(np.abs(v) ** 2)) for v in e.values()))
-        if early and best <= 2 * case.noise ** 2:
+        if early and best <= noise:
             break
-    noise = 2 * case.noise ** 2
     return {"cost": best, "noise": noise, "detectable": bool(best > noise)}
 
 
-def effects_shown(case, bound: float = 2 * float(np.log(1.2)), early: bool = True) -> dict[str, dict[str, float]]:
+#: A design case's box: values within twice the design tolerance (0.2) in log; beyond it a fit is drift.
+DESIGN_BOUND = 2 * float(np.log(1.2))
+
+
+def effects_shown(case, bound: float = DESIGN_BOUND, early: bool = True) -> dict[str, dict[str, float]]:
     """Does every hidden cause of a design case show above the noise? One :func:`best_baseline_fit` per cause.
 
     A missing section: the design's structure fitted to the truth's sections;
