@@ -25,9 +25,6 @@ def _run(*args: str, cwd) -> dict:
 
 @pytest.mark.slow
 @pytest.mark.long
-@pytest.mark.xfail(reason="core loss is refused beside a magnetising change in its causal form, whose phase is a "
-                          "loss (gain 0.044 of the 0.2 a further cause needs): skin effect + magnetising change named, "
-                          "2.67x the floor", strict=False)
 def test_virtual_lab_effects_are_all_named_and_leave_the_rest_near_the_noise(tmp_path):
     """All three effects named (no section added), the final cost within 3x the noise floor."""
     _run("lab", "--model", "hv-6section-freqdep", "--quick", "--out", "lab.csv", cwd=tmp_path)

@@ -57,7 +57,9 @@ measured short-circuit impedance it displaced the skin effect).
     thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = k f_ref^b``, so
     ``L(f_ref) = k L_linear``; ``k = 1`` unless the level is free); causal:
     ``k L (j f/f_ref)^(-b)`` (``k = 1`` unless the level is free; its loss
-    angle is ``b pi/2``); relaxation (the core's permeability dispersing
+    angle is ``b pi/2``); in both ``b <= 1/2``, the eddy-current limit of a
+    lamination's permeability (a steeper constant-phase element is mainly a
+    loss, named as core loss); relaxation (the core's permeability dispersing
     above a corner, Havriliak-Negami):
     ``L [1 - d + d (1 + (j f/f_c)^a)^(-b)]``, ``L`` below the corner,
     ``L (1 - d)`` far above it; ``a`` widens the dispersion symmetrically
@@ -255,6 +257,12 @@ class Effect:
         """A circuit of constant R, L, C, K realising the effect over ``[fmin, fmax]``, and a note."""
         return circuit, ""
 
+
+#: Steepest fall of a core's permeability, ``L ~ f^(-b)``, that the power-law magnetising forms take: the eddy-current
+#: (diffusion) limit of a lamination, whose permeability falls as ``(j f)^(-1/2)`` far above its corner (loss angle
+#: 45 deg). A constant-phase "inductance" with a larger loss angle is more resistive than inductive: a loss, which
+#: ``core-loss`` names (on the virtual lab's chain an exponent of 0.6 on the core loop took the core loss's share).
+MAX_PERMEABILITY_EXPONENT = 0.5
 
 #: A free level (``c`` of the causal skin form, ``k`` of the magnetising forms) stays within this factor of 1.
 LEVEL_RANGE = 4.0
@@ -464,8 +472,8 @@ class MagnetisingInductance(Effect):
             self.parameters.append(ExtraParameter("fc", lo, hi, _corner_starts(self), description="corner frequency, Hz"))
             return
         lo = 0.0 if self.form == "thesis" else 1e-4
-        self.parameters = [ExtraParameter("b", lo, 0.6, (0.005, 0.02, 0.05, 0.1, 0.2), log=False,
-                                          description="b_Lo: exponent")]
+        self.parameters = [ExtraParameter("b", lo, MAX_PERMEABILITY_EXPONENT, (0.005, 0.02, 0.05, 0.1, 0.2),
+                                          log=False, description="b_Lo: exponent")]
         if self.form in ("thesis", "causal") and self.level:
             self.parameters.append(ExtraParameter("k", 1 / LEVEL_RANGE, LEVEL_RANGE, (1.0,),
                                                   description="L(f_ref) / L_linear (a_Lo = k f_ref^b)"))
