@@ -311,6 +311,8 @@ def main() -> None:
     todo = cases(args.quick)
     if args.only:
         todo = [c for c in todo if any(t in _task_id(c) for t in args.only)]
+        if not todo:
+            ap.error(f"--only: no case id contains any of {', '.join(args.only)}")
     tasks = [Task(_task_id(c), run_case, c, label=_task_id(c)) for c in todo]
     t0 = time.perf_counter()
     results = run_tasks(tasks, executor=args.executor, store=ResultsStore(args.out), progress=True,
