@@ -63,6 +63,15 @@ def load_draws(path: Path = DRAWS_FILE) -> dict[str, int]:
     return {k: int(v) for k, v in doc.get("data", {}).get("draws", {}).items()}
 
 
+def _outcome(k: int, replaced_by: int | None, shows: list[bool]) -> str:
+    """What became of draw ``k`` of a case (``replaced_by``: the draw used instead of draw 0, if any)."""
+    if replaced_by is not None:
+        return "used" if k == replaced_by else "replaced"
+    if shows[0]:
+        return "used" if k == 0 else "not shown"
+    return f"used: no draw of {len(shows)} shows every cause" if k == 0 else "not shown"
+
+
 def main() -> None:
     from bench_diagnosis import _task_id, design_cases
     from estimation.executor import ResultsStore, Task, run_tasks
@@ -94,18 +103,16 @@ def main() -> None:
     # the draw used: the first that shows every cause (draw 0 when none does)
     draws = {i: s.index(True) for i, s in shows.items() if True in s and s.index(True) > 0}
     never = sorted(i for i, s in shows.items() if True not in s)
-    rows = []
-    for i in sorted(checked):
-        for k, t in enumerate(checked[i]):
-            outcome = ("used" if k == draws.get(i, 0) and shows[i][k] else "replaced" if i in draws
-                       else f"used: no draw of {len(checked[i])} shows every cause" if k == 0 else "not shown")
-            rows.append([i, k, ", ".join(f"{c} {v['cost'] / v['noise']:.3g}" for c, v in t.items()), outcome])
+    rows = [[i, k, ", ".join(f"{c} {v['cost'] / v['noise']:.3g}" for c, v in t.items()),
+             _outcome(k, draws.get(i), shows[i])]
+            for i in sorted(checked) for k, t in enumerate(checked[i])]
     write_results("design_draws", [table(
         "Design-anchored draws: each hidden cause's best fit without it, over the noise (below 1: invisible)",
         ["case", "draw", "cost / noise per cause", "outcome"], rows)],
         summary=f"{len(checked)} design cases with hidden causes checked, {len(draws)} draws replaced"
                 + (f", {len(never)} never shown" if never else ""), data={"draws": draws, "checked": checked})
     print(f"{len(checked)} cases checked, {len(draws)} replaced: {sorted(draws)}; never shown: {never}")
+
 
 if __name__ == "__main__":
     main()

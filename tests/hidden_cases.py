@@ -285,7 +285,8 @@ def design_case(causes: tuple[str, ...] | str, seed: int, noise: float = 0.003, 
     :mod:`detectability`); ``truth["draw"]`` records it.
     """
     causes = tuple(sorted(c for c in ((causes,) if isinstance(causes, str) else causes) if c != "none"))
-    rng = np.random.default_rng([seed, 33, int(drift)] + [SINGLE.index(c) for c in causes] + ([1000 + draw] if draw else []))
+    entropy = [seed, 33, int(drift)] + [SINGLE.index(c) for c in causes] + ([1000 + draw] if draw else [])
+    rng = np.random.default_rng(entropy)
     n = int(rng.choice([4, 5, 6]))
     f = np.logspace(3, 7, points)
     missing = "missing-section" in causes
