@@ -10,7 +10,7 @@ are relative RMS against the numpy engine.
 Part ``coupling``: the shipped FMI 2.0 FMUs (``fmus/two-section``,
 ``fmus/three-section``) coupled by fixed-step masters at communication steps
 from the FMUs' default step downwards: our Jacobi and Gauss-Seidel masters
-(:func:`pris_cosim.cosim.cosimulate`), libcosim's fixed-step master (Jacobi,
+(:func:`pris_cosim.fmi.cosim.cosimulate`), libcosim's fixed-step master (Jacobi,
 through libcosimpy, when installed), and the exact master at the default step.
 Errors are relative RMS on ``v_in`` and ``i_in`` against the monolithic FMU
 (``*_pris.fmu``) run by fmpy on the same grid over the first PRBS bits (50
@@ -36,11 +36,12 @@ from pathlib import Path
 
 import numpy as np
 
-from pris_cosim import codegen, cosim, fmi, libcosim_run, ngspice
-from pris_cosim import timedomain as td
-from pris_cosim.cosim_exact import cosimulate_exact
-from pris_cosim.models import get_model
-from pris_cosim.thesis_cases import THREE_SECTION, TWO_SECTION
+from pris_cosim.fmi import codegen, cosim, build as fmi, libcosim_run
+from pris_cosim.circuits import ngspice
+from pris_cosim.lab import timedomain as td
+from pris_cosim.fmi.cosim_exact import cosimulate_exact
+from pris_cosim.models.builtin import get_model
+from pris_cosim.fmi.thesis_cases import THREE_SECTION, TWO_SECTION
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from results_io import table, write_results  # noqa: E402

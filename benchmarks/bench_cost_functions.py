@@ -18,7 +18,7 @@ Writes into ``--out`` (default ``bench-cost-functions``):
   noise-free: within 5 %), the success rate within 5 % alone, median signed
   error per parameter and the worst parameter's median |error|, the bound of
   each parameter (relative one-sigma, %, for that approach's data at that
-  SNR, :func:`estimation.studies.three_section.cell_bound`) and the
+  SNR, :func:`estimation.studies.three_section.study.cell_bound`) and the
   efficiency (median |error| over seeds / bound) per parameter with its
   median and maximum over the parameters, median evaluations, evaluations
   per second, median and total wall time;
@@ -43,7 +43,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from estimation.studies import three_section as three
+from estimation.studies.three_section import study as three
 
 try:
     from results_io import table, write_results

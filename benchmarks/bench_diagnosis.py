@@ -31,7 +31,7 @@ Prints the confusion matrix (true cause set x named cause set), the counts
 named right per group, false alarms, and the wall times; then the speed of
 one one-port and one six-response diagnosis with the fast path against the
 same candidate fitted through the dense per-frequency solve
-(:meth:`pris_cosim.frf.ResponseModel.evaluate_grid`), measured in this run.
+(:meth:`pris_cosim.frf.response.ResponseModel.evaluate_grid`), measured in this run.
 Runs through the project's executor (local processes) and keeps every
 finished case in ``--out`` so an interrupted run resumes.
 
@@ -57,6 +57,9 @@ for p in (str(HERE), str(TESTS), str(HERE.parent)):
 # worker processes run this checkout's code (not another installed copy)
 os.environ["PYTHONPATH"] = os.pathsep.join([str(HERE.parent), str(HERE), str(TESTS), os.environ.get("PYTHONPATH", "")])
 
+import design_family  # noqa: E402  (beside this script)
+from design_family import DESIGN_FAMILY, DESIGN_SEEDS, task_id  # noqa: E402,F401
+
 
 def run_case(kind: str, causes: list[str], seed: int, noise: float = 0.003, group: str | None = None,
              sections: int | None = None, drift: bool = False, draw: int = 0) -> dict:
@@ -66,8 +69,8 @@ def run_case(kind: str, causes: list[str], seed: int, noise: float = 0.003, grou
     _jacobian_from_environment()
 
     from estimation.diagnosis import diagnose_frequency
-    from pris_cosim.models import get_model
-    from pris_cosim.netlist import parse_netlist
+    from pris_cosim.models.builtin import get_model
+    from pris_cosim.circuits.netlist import parse_netlist
 
     if kind == "design":
         case = hc.design_case(tuple(causes), seed, noise=noise, drift=drift, draw=draw)
@@ -138,14 +141,6 @@ def _parallel_partners(netlist: str) -> dict[str, set[str]]:
     return {name: members for members in groups.values() for name in members}
 
 
-#: The design-anchored family: hidden causes (and drift-only cases) on a design netlist, values within 10 %; a
-#: missing section: the winding has one section more than the design, which merges two of them.
-DESIGN_FAMILY = [((), False), ((), True), (("skin-effect",), False), (("core-loss",), False),
-                 (("magnetising-inductance",), False), (("skin-effect", "core-loss"), False),
-                 (("skin-effect", "magnetising-inductance"), False), (("skin-effect",), True),
-                 (("missing-section",), False), (("missing-section", "skin-effect"), False)]
-
-
 def _jacobian_from_environment() -> None:
     """Analytic Jacobian columns in the fits when ``--analytic-jacobian`` set ``BENCH_ANALYTIC_JACOBIAN``."""
     if os.environ.get("BENCH_ANALYTIC_JACOBIAN") == "1":
@@ -154,30 +149,13 @@ def _jacobian_from_environment() -> None:
         fit.ANALYTIC_JACOBIAN = True
 
 
-#: Seeds per case of the design-anchored family: 700-702 were the development's; 703-704 were added later (their first
-#: run found the missing-section split's plain seed missing, :mod:`estimation.diagnosis.unmerge`), 705-706 later still
-#: (their first run found the held-out check refusing a split over one point at a sharp resonance,
-#: :mod:`estimation.diagnosis.holdout`).
-DESIGN_SEEDS = 7
 
 
 def design_cases(quick: bool, draws: bool = True) -> list[dict]:
-    """The design-anchored family (:func:`hidden_cases.design_case`).
+    """The design-anchored family, with the draws :mod:`design_draws` chose where ``draws``."""
+    from design_draws import load_draws
 
-    With ``draws``, a case whose first draw hides a cause below the noise
-    uses the draw that :mod:`design_draws` found to show it (``draw`` in the
-    case, ``-dN`` in its id).
-    """
-    out = [{"kind": "design", "causes": list(c) or ["none"], "seed": 700 + s, "drift": drift}
-           for c, drift in DESIGN_FAMILY for s in range(1 if quick else DESIGN_SEEDS)]
-    if draws:
-        from design_draws import load_draws
-
-        used = load_draws()
-        for c in out:
-            if used.get(_task_id(c)):
-                c["draw"] = used[_task_id(c)]
-    return out
+    return design_family.design_cases(quick, load_draws() if draws else None)
 
 
 def named_right(r: dict, detectable_only: bool = False) -> bool:
@@ -223,29 +201,16 @@ def cases(quick: bool) -> list[dict]:
     return out
 
 
-def _task_id(c: dict) -> str:
-    parts = [c["kind"], "+".join(c["causes"]), str(c["seed"])]
-    if c.get("group"):
-        parts.append(c["group"])
-    if c.get("noise"):
-        parts.append(f"n{c['noise']}")
-    if c.get("drift"):
-        parts.append("drift")
-    if c.get("draw"):
-        parts.append(f"d{c['draw']}")
-    return "-".join(parts)
-
-
 def speed(progress: bool = True) -> dict:
     """Wall time of one one-port and one six-response diagnosis, and the fast path against the dense path."""
     import hidden_cases as hc
 
     from estimation.diagnosis import diagnose_frequency
-    from estimation.diagnosis.catalogue import SkinEffect
+    from estimation.diagnosis.causes.catalogue import SkinEffect
     from estimation.diagnosis.fit import FrequencyFit
-    from pris_cosim.frf import ResponseModel
-    from pris_cosim.models import get_model
-    from pris_cosim.netlist import parse_netlist
+    from pris_cosim.frf.response import ResponseModel
+    from pris_cosim.models.builtin import get_model
+    from pris_cosim.circuits.netlist import parse_netlist
 
     _jacobian_from_environment()
 
@@ -293,7 +258,7 @@ def speed(progress: bool = True) -> dict:
 
 
 def main() -> None:
-    from estimation.executor import ResultsStore, Task, run_tasks
+    from estimation.search.executor import ResultsStore, Task, run_tasks
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer seeds (about 35 cases)")
@@ -310,10 +275,10 @@ def main() -> None:
         os.environ["BENCH_ANALYTIC_JACOBIAN"] = "1"  # read by the worker processes too
     todo = cases(args.quick)
     if args.only:
-        todo = [c for c in todo if any(t in _task_id(c) for t in args.only)]
+        todo = [c for c in todo if any(t in task_id(c) for t in args.only)]
         if not todo:
             ap.error(f"--only: no case id contains any of {', '.join(args.only)}")
-    tasks = [Task(_task_id(c), run_case, c, label=_task_id(c)) for c in todo]
+    tasks = [Task(task_id(c), run_case, c, label=task_id(c)) for c in todo]
     t0 = time.perf_counter()
     results = run_tasks(tasks, executor=args.executor, store=ResultsStore(args.out), progress=True,
                         workers=args.workers, on_error="continue")

@@ -20,8 +20,8 @@ import statistics
 import sys
 import time
 
-from estimation.diagnosis.waveform import diagnose_waveforms
-from estimation.diagnosis.waveform_synthetic import WAVEFORM_CASE_CAUSES, thesis_case, waveform_case
+from estimation.diagnosis.waveform.source import diagnose_waveforms
+from estimation.diagnosis.waveform.synthetic import WAVEFORM_CASE_CAUSES, thesis_case, waveform_case
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -35,7 +35,7 @@ from test_estimate_defaults import draw_target, target_responses, write_response
 
 from estimation import cli  # noqa: E402
 from estimation.estimate import default_band  # noqa: E402
-from pris_cosim.models import get_model  # noqa: E402
+from pris_cosim.models.builtin import get_model  # noqa: E402
 import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 MODELS = ["two-section", "three-section", "cascade-4", "hv-4section", "hv-4section-cab2a", "hv-4section-cab2b",

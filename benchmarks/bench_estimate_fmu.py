@@ -63,7 +63,7 @@ CASES = {
 
 
 def record(fmu: Path, fs: float, duration: float) -> dict[str, np.ndarray]:
-    from pris_cosim.cosim import FmuRunner
+    from pris_cosim.fmi.cosim import FmuRunner
 
     n = int(round(fs * duration))
     with FmuRunner(fmu) as r:
@@ -81,8 +81,8 @@ def rel(a: np.ndarray, b: np.ndarray) -> float:
 def truth_scores(case: dict, w: dict[str, np.ndarray], fs: float) -> dict[str, float]:
     from estimation import approaches as ap
     from estimation.drives import RecordBridgeEngine
-    from pris_cosim.models import get_model
-    from pris_cosim.thesis_cases import THREE_SECTION, TWO_SECTION
+    from pris_cosim.models.builtin import get_model
+    from pris_cosim.fmi.thesis_cases import THREE_SECTION, TWO_SECTION
 
     circuit = get_model(case["model"]).circuit
     settings = TWO_SECTION.settings if case["model"] == "two-section" else THREE_SECTION.settings
@@ -105,8 +105,8 @@ LADDER_FREE = ("L_a", "L_b", "L_c", "C_a", "C_b", "k_ab")
 
 def ladder_replay(d: Path, truth: dict[str, float], record: Path) -> dict[str, float]:
     """Truth replay scores of the ladder FMU (worst output RMS error over the output RMS) per input hold."""
-    from estimation.fmu_model import FmuModel
-    from estimation.fmu_problem import read_record
+    from estimation.fmu.model import FmuModel
+    from estimation.fmu.problem import read_record
 
     outs = ["i_port", "v_port"]
     w = read_record(record, ["u_drive"] + outs)
@@ -140,7 +140,7 @@ def ladder_estimate(a: argparse.Namespace, d: Path, rec: str, truth: dict[str, f
 
     cpath = out / f"ladder-{Path(rec).stem}.json"
     cpath.write_text(json.dumps(ladder_config(d, rec, truth, a), indent=1))
-    cmd = [sys.executable, "-m", "pris_cosim.cli", "estimate", "--config", str(cpath), "--json",
+    cmd = [sys.executable, "-m", "pris_cosim.cli.commands", "estimate", "--config", str(cpath), "--json",
            "--out", str(out / f"ladder-{Path(rec).stem}")]
     if a.workers:
         cmd += ["--workers", str(a.workers)]

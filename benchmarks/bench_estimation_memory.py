@@ -25,7 +25,7 @@ import os, sys, time, resource, json
 import numpy as np
 from estimation import approaches as ap
 from estimation.parameters import ParameterSet
-from pris_cosim.models import get_model
+from pris_cosim.models.builtin import get_model
 ap.CHUNK_BYTES = int(sys.argv[1])
 P = int(sys.argv[2])
 model = get_model("three-section")

@@ -23,10 +23,10 @@ import warnings  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from pris_cosim import ngspice  # noqa: E402
+from pris_cosim.circuits import ngspice  # noqa: E402
 from pris_cosim.errors import NonPassiveWarning  # noqa: E402
-from pris_cosim.frf import ResponseModel, logspace_hz  # noqa: E402
-from pris_cosim.models import get_model  # noqa: E402
+from pris_cosim.frf.response import ResponseModel, logspace_hz  # noqa: E402
+from pris_cosim.models.builtin import get_model  # noqa: E402
 import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 

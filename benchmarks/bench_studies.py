@@ -27,9 +27,9 @@ import time
 import numpy as np
 
 from estimation import approaches as ap
-from estimation.studies import three_section as three
+from estimation.studies.three_section import study as three
 from estimation.studies import two_section as two
-from pris_cosim.models import get_model
+from pris_cosim.models.builtin import get_model
 import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 

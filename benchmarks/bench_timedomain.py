@@ -38,10 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pris_cosim import ngspice
-from pris_cosim import timedomain as td
-from pris_cosim.arrangement import SourceSettings
-from pris_cosim.models import get_model
+from pris_cosim.circuits import ngspice
+from pris_cosim.lab import timedomain as td
+from pris_cosim.circuits.arrangement import SourceSettings
+from pris_cosim.models.builtin import get_model
 import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 #: Runs a command and prints its wall time and the peak resident memory of the command (KiB).
@@ -130,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmpdir:
         tmp = Path(tmpdir)
         if not args.no_fmu:
-            from pris_cosim import codegen, cosim, fmi
+            from pris_cosim.fmi import codegen, cosim, build as fmi
 
             model = codegen.arrangement_model(dut, "n1", s, name="bench_pris")
             t_build, path = timed(lambda: fmi.build_fmu(model, tmp, use_cache=False, write_modelica=False))

@@ -18,8 +18,8 @@ import json
 import sys
 import time
 
-from pris_cosim import virtual_lab as vl
-from pris_cosim.models import get_model
+from pris_cosim.lab import virtual_lab as vl
+from pris_cosim.models.builtin import get_model
 import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 

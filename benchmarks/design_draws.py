@@ -73,8 +73,8 @@ def _outcome(k: int, replaced_by: int | None, shows: list[bool]) -> str:
 
 
 def main() -> None:
-    from bench_diagnosis import _task_id, design_cases
-    from estimation.executor import ResultsStore, Task, run_tasks
+    from design_family import design_cases, task_id
+    from estimation.search.executor import ResultsStore, Task, run_tasks
     from results_io import table, write_results
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -84,10 +84,10 @@ def main() -> None:
     ap.add_argument("--collect", action="store_true",
                     help="run nothing: write the draws of the cases already checked in --out")
     args = ap.parse_args()
-    todo = [c for c in design_cases(quick=False, draws=False) if c["causes"] != ["none"]]
+    todo = [c for c in design_cases(quick=False) if c["causes"] != ["none"]]
     if args.only:
-        todo = [c for c in todo if any(t in _task_id(c) for t in args.only)]
-    tasks = [Task(_task_id(c), check_case, {"causes": c["causes"], "seed": c["seed"], "drift": c["drift"]})
+        todo = [c for c in todo if any(t in task_id(c) for t in args.only)]
+    tasks = [Task(task_id(c), check_case, {"causes": c["causes"], "seed": c["seed"], "drift": c["drift"]})
              for c in todo]
     if args.collect:
         runs = Path(args.out) / "runs"

@@ -3,7 +3,7 @@
 Every approach maps a population of unit-cube points ``U`` ``(P, n)`` (the
 optimiser's view, see :class:`estimation.parameters.ParameterSet`) to
 ``(P,)`` costs with :meth:`Approach.cost_batch`, the batched objective the
-optimisers of :mod:`estimation.optimisers` call. Each approach records the
+optimisers of :mod:`estimation.search.optimisers` call. Each approach records the
 engine it used and the wall time per evaluation (:attr:`Approach.stats`).
 
 Approaches
@@ -30,12 +30,12 @@ Approaches
 
 Engines
 -------
-:class:`PrisEngine` reproduces :func:`pris_cosim.timedomain.simulate_pris`
+:class:`PrisEngine` reproduces :func:`pris_cosim.lab.timedomain.simulate_pris`
 (to rounding) for a population at once when ``fs`` is an integer multiple of
 ``f_clk``: one batched matrix exponential per population, a recurrence over
 PRBS bits and a vectorised fill of the samples inside each bit.
 :class:`InjectionEngine` reproduces
-:func:`pris_cosim.timedomain.simulate_current_injection` for a population.
+:func:`pris_cosim.lab.timedomain.simulate_current_injection` for a population.
 """
 
 from __future__ import annotations
@@ -48,14 +48,19 @@ from typing import Any
 import numpy as np
 from scipy import signal as _signal
 
-from pris_cosim.arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangement
-from pris_cosim.circuit import GROUND, Circuit
-from pris_cosim.mna import MNA
-from pris_cosim.spectral import DEFAULT_OVERLAP, DEFAULT_WINDOW
-from pris_cosim.signals import lfsr_prbs
-
-from . import costs as _costs
-from .parameters import ParameterSet
+from estimation import costs as _costs
+from estimation.holds import batched_expm
+from estimation.parameters import ParameterSet
+from pris_cosim.circuits.arrangement import (
+    BRIDGE,
+    SENSE_INDUCTOR,
+    SourceSettings,
+    pris_arrangement,
+)
+from pris_cosim.circuits.circuit import GROUND, Circuit
+from pris_cosim.circuits.mna import MNA
+from pris_cosim.signals.perturbation import lfsr_prbs
+from pris_cosim.signals.spectral import DEFAULT_OVERLAP, DEFAULT_WINDOW
 
 #: Bytes that one chunk of a population may hold in simulated records (all arrays of the chunk together).
 CHUNK_BYTES = 256 * 2**20
@@ -101,39 +106,6 @@ class ApproachError(ValueError):
 
 
 # ====================================================================== engines
-_PADE13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353796428800.0, 129060195264000.0,
-           10559470521600.0, 670442572800.0, 33522128640.0, 1323241920.0, 40840800.0, 960960.0, 16380.0, 182.0, 1.0)
-_THETA13 = 5.371920351148152
-
-
-def batched_expm(M: np.ndarray) -> np.ndarray:
-    """Matrix exponential of a batch ``(P, n, n)``: Pade 13 with scaling and squaring (Higham 2005).
-
-    One set of batched products and one batched solve for the whole
-    population (``scipy.linalg.expm`` takes about 10 ms per 7x7 matrix of
-    the PRIS arrangement here, a thousand times longer); each member gets
-    its own number of squarings.
-    """
-    M = np.asarray(M, float)
-    P, n, _ = M.shape
-    norm = np.abs(M).sum(axis=1).max(axis=1) if P else np.zeros(0)
-    norm = np.where(np.isfinite(norm), norm, 0.0)
-    s = np.maximum(0, np.ceil(np.log2(np.maximum(norm, 1e-300) / _THETA13))).astype(int)
-    A = M / (2.0 ** s)[:, None, None]
-    b = _PADE13
-    eye = np.broadcast_to(np.eye(n), (P, n, n))
-    A2 = A @ A
-    A4 = A2 @ A2
-    A6 = A4 @ A2
-    U = A @ (A6 @ (b[13] * A6 + b[11] * A4 + b[9] * A2) + b[7] * A6 + b[5] * A4 + b[3] * A2 + b[1] * eye)
-    V = A6 @ (b[12] * A6 + b[10] * A4 + b[8] * A2) + b[6] * A6 + b[4] * A4 + b[2] * A2 + b[0] * eye
-    E = np.linalg.solve(V - U, V + U)
-    for k in range(int(s.max(initial=0))):
-        sel = s > k
-        E[sel] = E[sel] @ E[sel]
-    return E
-
-
 def _batched_zoh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     """``Phi = expm(A h)``, ``Gamma = int_0^h expm(A s) ds B`` for a batch ``A`` (P, n, n), ``B`` (P, n, m)."""
     P, n, _ = A.shape
@@ -231,12 +203,12 @@ class PrisEngine:
         ``(A, B, C, D)`` of a single-input, single-output analogue filter (B, C as
         vectors; time in s) that every returned channel passes before it is
         sampled, as a measurement chain's anti-alias filter does
-        (:func:`pris_cosim.virtual_lab.anti_alias_ss`). Its states are appended to
+        (:func:`pris_cosim.lab.virtual_lab.anti_alias_ss`). Its states are appended to
         the arrangement's, so the filtered samples are exact.
 
     Notes
     -----
-    Same conventions as :func:`pris_cosim.timedomain.simulate_pris` (zero
+    Same conventions as :func:`pris_cosim.lab.timedomain.simulate_pris` (zero
     initial state; sample k at ``k / fs``; ``i_in`` is the ``Lpris``
     current). With ``s = fs / f_clk`` samples per bit, the state at the
     first sample of bit ``b + 1`` is ``Phi^s x_b + g_s u_b`` (one batched
@@ -398,7 +370,7 @@ class InjectionEngine:
         the next (first-order hold, :mod:`estimation.holds`): unbiased for the
         continuous current of a physical source. ``"step"``: sample k holds
         from ``k / fs`` to ``(k + 1) / fs`` (zero-order hold, thesis 4.2.3, as
-        :func:`pris_cosim.timedomain.simulate_current_injection`), which
+        :func:`pris_cosim.lab.timedomain.simulate_current_injection`), which
         delays the current by half a sample.
 
     Notes
@@ -449,7 +421,7 @@ class InjectionEngine:
                 x = _blocked_states(Phi, Gam[:, :, 0], self.i, self.block)  # (P, K, n)
                 Dt = D[:, 0, 0]
             else:  # first-order hold: z_k = x_k - Gamma1 u_k, x_0 = 0
-                from .holds import batched_foh, foh_recurrence
+                from estimation.holds import batched_foh, foh_recurrence
 
                 Phi, G0, G1 = batched_foh(A, B, 1.0 / self.fs)
                 g1 = G1[:, :, 0]
@@ -524,8 +496,8 @@ def welch_h1(x: np.ndarray, ys: Sequence[np.ndarray], fs: float, settings: Welch
 
     Notes
     -----
-    Equal (to rounding) to :func:`pris_cosim.spectral.tfestimate` and
-    :func:`pris_cosim.spectral.coherence` record by record; here every
+    Equal (to rounding) to :func:`pris_cosim.signals.spectral.tfestimate` and
+    :func:`pris_cosim.signals.spectral.coherence` record by record; here every
     record of a population is processed in one call.
     """
     x = np.asarray(x, float)[..., settings.skip:]
@@ -709,7 +681,7 @@ class AnalyticFrequency(Approach):
     Parameters
     ----------
     params : ParameterSet
-    response_set : pris_cosim.models.ResponseSet
+    response_set : pris_cosim.models.builtin.ResponseSet
         Compiled responses of the estimate's circuit.
     frequency_hz : array_like, Hz
         ``(F,)`` comparison frequencies.
@@ -929,7 +901,7 @@ class WelchProxyFrequency(Approach):
     def __init__(self, params: ParameterSet, dut: Circuit, port: str, settings: SourceSettings, fs: float,
                  nperseg: int, bins: np.ndarray, specs: Sequence[ResponseSpec], target: Mapping[str, np.ndarray],
                  cost: Any, half_width: int = 3, sub: int = 4, penalty: float | None = None):
-        from pris_cosim.frf import Response, ResponseModel
+        from pris_cosim.frf.response import Response, ResponseModel
 
         super().__init__(params, penalty)
         arr = pris_arrangement(dut, port, settings)

@@ -49,8 +49,8 @@ from typing import Any
 
 import numpy as np
 
-from . import approaches as ap
-from .parameters import ParameterSet
+from estimation import approaches as ap
+from estimation.parameters import ParameterSet
 
 __all__ = ["DiscreteBridgeResponse", "bridge_response_proxy", "discrete_response", "may_alias", "model_modes", "record_model",
            "zoh_frequency_response", "zoh_modes"]
@@ -141,7 +141,7 @@ def record_model(u: np.ndarray, y: np.ndarray, order: int, block_rows: int = 100
     is exact, and the model is consistent under white output noise. None when
     the record is too short for ``order`` states.
     """
-    from .studies import modal
+    from estimation.studies import modal
 
     u = np.asarray(u, float)[:max_samples]
     y = np.asarray(y, float)[:max_samples]
@@ -428,7 +428,7 @@ def may_alias(proxy: DiscreteBridgeResponse, params: ParameterSet, fs: float, po
     ``fs / 2``. Only then does a mode seen in the samples have several branches, each a basin of
     the stand-in, and stage 1 needs its least-squares starts.
     """
-    from .optimisers_population import _latin_hypercube
+    from estimation.search.population import _latin_hypercube
 
     n = len(params.varying)
     U = np.vstack([np.full((1, n), 0.5), _latin_hypercube(np.random.default_rng(0), points, n)])

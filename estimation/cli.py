@@ -8,7 +8,7 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
     Runs the estimation study NAME (``two-section``, ``three-section``,
     ``hv-transformer`` (thesis chapter 5; ``--measured FILE.csv`` fits measured
     responses instead of the virtual lab's, ``--cases 1,3`` a subset),
-    ``real-data`` (fits of the real measured files)) through :func:`estimation.executor.run_tasks`: local
+    ``real-data`` (fits of the real measured files)) through :func:`estimation.search.executor.run_tasks`: local
     processes by default, ``--scheduler serial`` in this process, or a Dask
     scheduler ``tcp://host:port``. Every finished run is written at once to
     ``DIR/runs/<id>.json`` and ``DIR/results.csv``; running again resumes
@@ -45,7 +45,7 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
                                                   # source's RLC; default when "source" is given), "current"
                                                   # (sampled current held linearly), see estimation.drives
           "cost": "sse",                          # "sse" (4.21), "rmse" (4.29/4.32/4.39/4.45), "correlation"
-          "optimiser": "ga+local",                # stage 1: any estimation.optimisers.minimize method
+          "optimiser": "ga+local",                # stage 1: any estimation.search.optimisers.minimize method
           "options": {},                          # its options (default: estimation.estimate.default_plan)
           "budget": {"max_evals": 20000, "max_time_s": 60, "restarts": 3},
           "seed": 1
@@ -56,7 +56,7 @@ group ``pris_cosim.commands`` (``study = "estimation.cli:register"``);
     ``input``, ``output``, ``outputs``, ``current``, ``parameters``, ``ties``, ``target``,
     ``approach``, ``budget``, ``substeps``, ``diff_step``, ``first_window``, ``seed``, ``values``,
     ``input_hold``) goes to
-    :mod:`estimation.fmu_estimate`; ``--out DIR``, ``--scheduler``, ``--workers`` apply to it.
+    :mod:`estimation.fmu.estimate`; ``--out DIR``, ``--scheduler``, ``--workers`` apply to it.
 
     Defaults (``estimation.estimate``): GA + L-BFGS-B sized to the number of
     parameters, a least-squares polish on the approach's own residuals, 3
@@ -93,7 +93,7 @@ from typing import Any
 
 import numpy as np
 
-from .executor import to_jsonable
+from estimation.search.executor import to_jsonable
 
 STUDIES = ("two-section", "three-section", "hv-transformer", "real-data")
 
@@ -146,7 +146,7 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
         raise EstimationInputError(f"--seed must be an integer from 0 to {2**32 - 1} (got {seed})")
     out = out or f"study-{name}{'-quick' if quick else ''}"
     if name == "hv-transformer":
-        from .studies import hv_transformer
+        from estimation.studies import hv_transformer
 
         chosen = [c.strip() for c in cases.split(",") if c.strip()] if cases else None
         for c in chosen or ():
@@ -157,11 +157,11 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
         return hv_transformer.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed,
                                   progress=progress, measured=measured, cases=chosen, diagnose=diagnose)
     if name == "real-data":
-        from .studies import real_data
+        from estimation.studies import real_data
 
         return real_data.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed, progress=progress)
     if name == "three-section":
-        from .studies import three_section
+        from estimation.studies.three_section import study as three_section
 
         levels, chosen_opts = _study_lists(snr_db, optimisers, three_section.OPTIMISERS)
         if seeds is not None and seeds < 1:
@@ -169,7 +169,7 @@ def run_study_command(name: str, quick: bool = False, out: str | None = None, sc
         return three_section.run(quick=quick, out=out, scheduler=scheduler, workers=workers, seed=seed,
                                  progress=progress, seeds=seeds or 1, snr_db=levels, optimisers=chosen_opts)
     if name == "two-section":
-        from .studies import two_section
+        from estimation.studies import two_section
 
         chosen = [c.strip() for c in cases.split(",") if c.strip()] if cases else None
         for c in chosen or ():
@@ -260,7 +260,7 @@ def load_config(path: str | Path) -> dict[str, Any]:
 
 def _read_record(tgt: dict[str, Any]) -> Any:
     """The waveform record of a ``waveforms-csv`` target (one-line errors naming the file)."""
-    from pris_cosim.measured import read_waveform_csv
+    from pris_cosim.measured.formats import read_waveform_csv
 
     path = tgt.get("path")
     if not isinstance(path, str):
@@ -274,9 +274,9 @@ def _read_record(tgt: dict[str, Any]) -> Any:
 
 
 def _parameter_set(model: Any, cfg: dict[str, Any]) -> Any:
-    from .parameters import ParameterSet
+    from estimation.parameters import ParameterSet
 
-    from .estimate import DEFAULT_BASE, DEFAULT_BOUNDS, DEFAULT_TIES
+    from estimation.estimate import DEFAULT_BASE, DEFAULT_BOUNDS, DEFAULT_TIES
 
     spec = _need(cfg, "parameters", dict, {})
     ties = _need(cfg, "ties", dict, {})
@@ -285,7 +285,7 @@ def _parameter_set(model: Any, cfg: dict[str, Any]) -> Any:
     if not spec:
         spec = {k: {"min": lo, "max": hi} for k, (lo, hi) in DEFAULT_BOUNDS.get(model.name, {}).items()}
     if not spec and model.name in DEFAULT_BASE:
-        from pris_cosim.models import get_model
+        from pris_cosim.models.builtin import get_model
 
         keep = set(model.circuit.free_names())
         spec = {k: {} for k in get_model(DEFAULT_BASE[model.name]).circuit.free_names() if k in keep}
@@ -314,12 +314,12 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
                  workers: int | None = None, base: str | Path = ".") -> dict[str, Any]:
     """One estimation from a configuration dictionary (see the module docstring).
 
-    A config with ``"fmu"`` goes to :func:`estimation.fmu_estimate.run_fmu_estimate` (``out``,
+    A config with ``"fmu"`` goes to :func:`estimation.fmu.estimate.run_fmu_estimate` (``out``,
     ``scheduler``, ``workers`` apply to it; relative paths are taken from ``base``).
     """
     if "fmu" in cfg:
-        from .fmu_estimate import run_fmu_estimate
-        from .fmu_model import FmuSetupError
+        from estimation.fmu.estimate import run_fmu_estimate
+        from estimation.fmu.model import FmuSetupError
 
         if workers is not None and workers < 1:
             raise EstimationInputError(f"--workers must be at least 1 (got {workers})")
@@ -334,17 +334,17 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
     for key in ("values", "input_hold"):
         if key in cfg:
             raise EstimationInputError(f"config key {key!r} applies only to a config with 'fmu'")
-    from pris_cosim import timedomain as td
-    from pris_cosim.arrangement import SourceSettings
-    from pris_cosim.measured import read_response_csv
-    from pris_cosim.models import get_model
+    from pris_cosim.lab import timedomain as td
+    from pris_cosim.circuits.arrangement import SourceSettings
+    from pris_cosim.measured.formats import read_response_csv
+    from pris_cosim.models.builtin import get_model
 
-    from . import approaches as ap
+    from estimation import approaches as ap
 
     t0 = time.perf_counter()
     try:
         if "netlist" in cfg:
-            from .netlist_model import model_from_netlist
+            from estimation.netlist_model import model_from_netlist
 
             model = model_from_netlist(_need(cfg, "netlist", str, ""), _need(cfg, "port", str, ""))
         else:
@@ -368,7 +368,7 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
     fs = float(_need(cfg, "fs", (int, float), 300e3))
     duration = float(_need(cfg, "duration", (int, float), 0.3))
     fr = _need(cfg, "frequency", dict, {})
-    from .estimate import default_band
+    from estimation.estimate import default_band
 
     band = (20.0, 9e3) if "fmin" in fr and "fmax" in fr else default_band(model, conf)
     fmin, fmax, points = float(fr.get("fmin", band[0])), float(fr.get("fmax", band[1])), int(fr.get("points", 200))
@@ -447,7 +447,7 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
             probe_w = {k: v[:n] for k, v in w.items() if k.startswith("v_") and k not in ("v_in", "v_bprbs")}
         else:
             raise EstimationInputError(f"target kind {kind!r} does not suit approach {approach_name!r}")
-        from .drives import choose_drive
+        from estimation.drives import choose_drive
 
         try:
             drive = choose_drive(_need(cfg, "drive", str, "auto"), "source" in cfg, v_bprbs is not None)
@@ -457,7 +457,7 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
                                          metric, fmin, fmax, probe_w, v_bprbs if drive == "bridge" else None)
     else:
         raise EstimationInputError(f"approach must be frequency, frequency-simulated, time, emd or iemd (got {approach_name!r})")
-    from .estimate import resonance_proxy
+    from estimation.estimate import resonance_proxy
 
     exact = kind == "responses-csv" or (kind == "simulated" and tgt.get("method", "analytic") == "analytic")
     if exact and proxy is None and isinstance(approach, ap.AnalyticFrequency):
@@ -479,8 +479,8 @@ def _frequency_from_record(name: str, params: Any, model: Any, conf: Any, source
     -------
     (approach, stand-in or None)
     """
-    from . import approaches as ap
-    from .drives import RecordBridgeEngine
+    from estimation import approaches as ap
+    from estimation.drives import RecordBridgeEngine
 
     fs, n = wf.fs, wf.n_samples
     welch = ap.WelchSettings()
@@ -522,8 +522,8 @@ def _time_approach(name: str, params: Any, model: Any, conf: Any, source: Any, f
     the bridge switches on sample instants), else by its sampled current injected at the port,
     held linearly between samples (:mod:`estimation.drives`).
     """
-    from . import approaches as ap
-    from . import estimate as es
+    from estimation import approaches as ap
+    from estimation import estimate as es
 
     m = "rmse" if metric in ("rmse", "nrmse", "sse") else "correlation"
     if kind == "simulated":
@@ -532,20 +532,20 @@ def _time_approach(name: str, params: Any, model: Any, conf: Any, source: Any, f
         cls: Any = {"time": es.RecordTime, "emd": es.RecordEMD, "iemd": es.RecordIEMD}[name]
         approach = cls(params, eng, v_in, m, chunk=16)
         approach.probe_targets = dict(probes)
-        from .bridge_response import bridge_response_proxy
+        from estimation.bridge_response import bridge_response_proxy
 
         proxy = bridge_response_proxy(params, eng, {"v_in": v_in, **probes}, fmin, fmax)
         if proxy is not None:
             return approach, proxy
     elif v_bprbs is not None:
-        from .drives import RecordBridgeEngine
+        from estimation.drives import RecordBridgeEngine
 
         eng = RecordBridgeEngine(model.circuit, conf.port, source, fs, v_bprbs, probes=[k[2:] for k in probes])
         cls = {"time": es.RecordTime, "emd": es.RecordEMD, "iemd": es.RecordIEMD}[name]
         approach = cls(params, eng, v_in, m, chunk=16)
         approach.probe_targets = dict(probes)
         approach.engine = approach.engine.replace("zoh-bridge", "recorded-bridge")
-        from .bridge_response import bridge_response_proxy
+        from estimation.bridge_response import bridge_response_proxy
 
         # the record's own sampled map from the bridge voltage: no aliasing bias (estimation.bridge_response)
         proxy = bridge_response_proxy(params, eng, {"v_in": v_in, **probes}, fmin, fmax)
@@ -564,8 +564,8 @@ def _fit_and_report(cfg: dict[str, Any], approach: Any, params: Any, model: Any,
                     known_target: dict[str, float] | None, t0: float, progress: bool, proxy: Any = None
                     ) -> dict[str, Any]:
     """Run the recipe of :mod:`estimation.estimate` and build the answer (estimate = the scored model)."""
-    from .estimate import default_plan, frequency_data, run_plan
-    from .optimisers import Budget
+    from estimation.estimate import default_plan, frequency_data, run_plan
+    from estimation.search.optimisers import Budget
 
     b = _need(cfg, "budget", dict, {})
     plan = default_plan(approach.n)

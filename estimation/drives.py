@@ -30,11 +30,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pris_cosim.arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangement
-from pris_cosim.circuit import Circuit
-from pris_cosim.mna import MNA
+from pris_cosim.circuits.arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangement
+from pris_cosim.circuits.circuit import Circuit
+from pris_cosim.circuits.mna import MNA
 
-from .approaches import ApproachError, PrisEngine
+from estimation.approaches import ApproachError, PrisEngine
 
 DRIVES = ("auto", "bridge", "current")
 

@@ -18,7 +18,7 @@ study, thesis Table 4.5; three-section study, Tables 4.9/4.10):
    (40 iterations), the lowest end kept -- the ringing modes of a record sampled
    below twice their frequency leave one narrow basin per alias branch;
 2. a trust-region least-squares polish on the approach's own residuals
-   (Jacobian-scaled, :func:`estimation.local_search.least_squares_polish`,
+   (Jacobian-scaled, :func:`estimation.search.local_search.least_squares_polish`,
    ``30 + 10 n`` evaluations of the residuals),
    which moves the weakly sensitive resistances that the summed cost hides;
 3. ``restarts`` independent seeds (3 up to 12 parameters, 2 above), and more
@@ -46,10 +46,10 @@ from typing import Any
 
 import numpy as np
 
-from . import approaches as ap
-from .optimisers import Budget, minimize
-from .parameters import ParameterSet
-from .recipe import End, Outcome, Start, run_recipe
+from estimation import approaches as ap
+from estimation.search.optimisers import Budget, minimize
+from estimation.parameters import ParameterSet
+from estimation.search.recipe import End, Outcome, Start, run_recipe
 
 #: Ties assumed when a config names neither parameters nor ties: the thesis's estimation vectors
 #: (two-section 4.1.3: R2 = R1, C2 = C1) and, for the 4-section cascade, the uniform winding of the
@@ -95,15 +95,15 @@ def _least_squares_starts(proxy: ap.Approach, x: np.ndarray, f: float, starts: i
     frequency has a narrow basin per alias branch of those modes (a mode at
     ``f`` and one at ``k fs +- f`` ring alike in the samples); a population
     method settles in one branch. ``starts`` Latin-hypercube points and the
-    global search's answer are each descended (:func:`estimation.local_search.batched_least_squares`);
+    global search's answer are each descended (:func:`estimation.search.local_search.batched_least_squares`);
     the lowest end replaces the answer when it is lower.
 
     Returns
     -------
     x, cost, evaluations, note
     """
-    from .local_search import batched_least_squares
-    from .optimisers_population import _latin_hypercube
+    from estimation.search.local_search import batched_least_squares
+    from estimation.search.population import _latin_hypercube
 
     X0 = np.vstack([x[None], _latin_hypercube(np.random.default_rng(seed), int(starts), x.size)])
     X, c, nfev = batched_least_squares(proxy.residuals, X0, iterations=iterations, max_time_s=max_time_s)
@@ -134,7 +134,7 @@ def default_plan(n: int, per_eval_s: float | None = None) -> dict[str, Any]:
 
 
 class ApproachKind:
-    """A built-in model or netlist scored by an approach: the stages of :func:`estimation.recipe.run_recipe`.
+    """A built-in model or netlist scored by an approach: the stages of :func:`estimation.search.recipe.run_recipe`.
 
     - start ``k``: the plan's global search (``plan["method"]``, seed ``seed + k``) on the stand-in
       ``proxy`` (or the approach), then, when the stand-in asks for them, the Levenberg-Marquardt
@@ -197,7 +197,7 @@ class ApproachKind:
         return Start(x, f1, runs, msg, {"seed": self.seed + k})
 
     def descend(self, starts: Sequence[tuple[int, Start]]) -> list[End]:
-        from .local_search import least_squares_polish
+        from estimation.search.local_search import least_squares_polish
 
         out = []
         for _, s in starts:
@@ -211,7 +211,7 @@ class ApproachKind:
         return out
 
     def polish(self, x: np.ndarray) -> tuple[np.ndarray, float, int, str] | None:
-        from .local_search import least_squares_polish
+        from estimation.search.local_search import least_squares_polish
 
         if int(self.plan["polish_iterations"]) <= 0:
             return None
@@ -227,7 +227,7 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
     """Run the recipe on ``approach`` (stage 1 on ``proxy`` when given) and judge the answer.
 
     The stages are :class:`ApproachKind`'s, in the order and with the restart rule of
-    :func:`estimation.recipe.run_recipe`.
+    :func:`estimation.search.recipe.run_recipe`.
 
     Parameters
     ----------
@@ -267,7 +267,7 @@ def default_band(model: Any, configuration: Any, override_values: Mapping[str, f
     the modes are the eigenvalues of the configuration's state matrix (current
     drive at its port, shorts applied) at the model's values.
     """
-    from pris_cosim.mna import MNA
+    from pris_cosim.circuits.mna import MNA
 
     if model.name == "two-section":
         return 20.0, 9e3
@@ -301,9 +301,9 @@ def resonance_proxy(approach: ap.Approach, params: ParameterSet, circuit: Any, c
     """
     from types import SimpleNamespace
 
-    from pris_cosim.mna import MNA
+    from pris_cosim.circuits.mna import MNA
 
-    from .studies import modal
+    from estimation.studies import modal
 
     target = getattr(approach, "target", None)
     f = getattr(approach, "f", None)

@@ -29,12 +29,45 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["batched_foh", "foh_recurrence", "decide_hold", "HOLDS", "MAX_HELD_LEVELS"]
+__all__ = ["batched_expm", "batched_foh", "foh_recurrence", "decide_hold", "HOLDS", "MAX_HELD_LEVELS"]
 
 #: Input holds of a replayed record: decided from the data, zero-order, linear.
 HOLDS = ("auto", "zoh", "linear")
 #: An input with at most this many distinct levels (and at most one per 8 samples) counts as held.
 MAX_HELD_LEVELS = 32
+
+
+_PADE13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353796428800.0, 129060195264000.0,
+           10559470521600.0, 670442572800.0, 33522128640.0, 1323241920.0, 40840800.0, 960960.0, 16380.0, 182.0, 1.0)
+_THETA13 = 5.371920351148152
+
+
+def batched_expm(M: np.ndarray) -> np.ndarray:
+    """Matrix exponential of a batch ``(P, n, n)``: Pade 13 with scaling and squaring (Higham 2005).
+
+    One set of batched products and one batched solve for the whole
+    population (``scipy.linalg.expm`` takes about 10 ms per 7x7 matrix of
+    the PRIS arrangement here, a thousand times longer); each member gets
+    its own number of squarings.
+    """
+    M = np.asarray(M, float)
+    P, n, _ = M.shape
+    norm = np.abs(M).sum(axis=1).max(axis=1) if P else np.zeros(0)
+    norm = np.where(np.isfinite(norm), norm, 0.0)
+    s = np.maximum(0, np.ceil(np.log2(np.maximum(norm, 1e-300) / _THETA13))).astype(int)
+    A = M / (2.0 ** s)[:, None, None]
+    b = _PADE13
+    eye = np.broadcast_to(np.eye(n), (P, n, n))
+    A2 = A @ A
+    A4 = A2 @ A2
+    A6 = A4 @ A2
+    U = A @ (A6 @ (b[13] * A6 + b[11] * A4 + b[9] * A2) + b[7] * A6 + b[5] * A4 + b[3] * A2 + b[1] * eye)
+    V = A6 @ (b[12] * A6 + b[10] * A4 + b[8] * A2) + b[6] * A6 + b[4] * A4 + b[2] * A2 + b[0] * eye
+    E = np.linalg.solve(V - U, V + U)
+    for k in range(int(s.max(initial=0))):
+        sel = s > k
+        E[sel] = E[sel] @ E[sel]
+    return E
 
 
 def batched_foh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -54,7 +87,6 @@ def batched_foh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.
     Phi, Gamma0, Gamma1 : numpy.ndarray
         ``(P, n, n)``, ``(P, n, m)``, ``(P, n, m)``.
     """
-    from .approaches import batched_expm
 
     A = np.asarray(A, float)
     B = np.asarray(B, float)

@@ -4,18 +4,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pris_cosim.frf import Response
-from pris_cosim.models import Configuration, Model
-from pris_cosim.netlist import read_netlist
+from pris_cosim.frf.response import Response
+from pris_cosim.models.builtin import Configuration, Model
+from pris_cosim.circuits.netlist import read_netlist
 
 
 def model_from_netlist(path: str | Path, port: str) -> Model:
-    """Wrap the netlist at ``path`` as a :class:`~pris_cosim.models.Model` driven at ``port``.
+    """Wrap the netlist at ``path`` as a :class:`~pris_cosim.models.builtin.Model` driven at ``port``.
 
     Parameters
     ----------
     path : str or Path
-        SPICE-style netlist file (see ``pris_cosim.netlist``).
+        SPICE-style netlist file (see ``pris_cosim.circuits.netlist``).
     port : str
         Node driven against ground 0; the configuration's response is ``Zin`` (ohm).
 

@@ -30,9 +30,9 @@ from typing import Any, Union
 
 import numpy as np
 
-from pris_cosim.circuit import Circuit
+from pris_cosim.circuits.circuit import Circuit
 from pris_cosim.errors import ExpressionError
-from pris_cosim.expressions import Expression
+from pris_cosim.circuits.expressions import Expression
 
 Numeric = Union[float, np.ndarray]
 Bound = Union[float, tuple[float, float]]

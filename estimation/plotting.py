@@ -13,7 +13,7 @@ def search_space_axes(space: Mapping[str, Any], metric: str, ax: Any = None) -> 
     Parameters
     ----------
     space : mapping
-        From :func:`estimation.studies.three_section.search_space`.
+        From :func:`estimation.studies.three_section.study.search_space`.
     metric : str
         ``"rmse"`` or ``"correlation"``.
     ax : matplotlib Axes, optional

@@ -1,7 +1,7 @@
 """Lumped-network fits of real measured transformer data.
 
 Two public data sets (``<shared>/data/real``, see its README) are fitted by
-circuits built with :class:`pris_cosim.circuit.Circuit`, so every fitted
+circuits built with :class:`pris_cosim.circuits.circuit.Circuit`, so every fitted
 model can be simulated, exported as a netlist or built as an FMU like any
 other circuit of the project.
 
@@ -36,12 +36,12 @@ from typing import Any
 
 import numpy as np
 
-from pris_cosim.circuit import Circuit, Parameter
-from pris_cosim.frf import ResponseModel
-from pris_cosim.measured import MeasuredDataError, MeasuredResponses, read_mag_phase_rows, read_multisegment_csv
+from pris_cosim.circuits.circuit import Circuit, Parameter
+from pris_cosim.frf.response import ResponseModel
+from pris_cosim.measured.formats import MeasuredDataError, MeasuredResponses, read_mag_phase_rows, read_multisegment_csv
 
-from .optimisers import Budget, minimize
-from .parameters import ParameterSet
+from estimation.search.optimisers import Budget, minimize
+from estimation.parameters import ParameterSet
 
 SMALL_FILE = "small_transformer_3_loads.csv"
 ADMITTANCE_FILE = "distribution_transformer_admittance_03PK10.txt"
@@ -273,7 +273,7 @@ def admittance_start(data: MeasuredResponses, branches: int = 3) -> dict[str, fl
     dict
         Name to value, SI units.
     """
-    from .resonances import find_resonances
+    from estimation.resonances import find_resonances
 
     f, y = data.frequency_hz, data["Yin"]
     peaks = [r for r in find_resonances(f, y, min_prominence_db=3.0) if r.kind == "parallel"]
@@ -560,9 +560,9 @@ def fit_small_transformer_skin(
     the constant-resistance model, all refitted from ``base`` by least
     squares (responses by a dense solve per frequency).  The fitted formula
     is then realised by a passive Foster R-L ladder per winding
-    (:func:`pris_cosim.freqdep.fit_impedance`,
-    :func:`pris_cosim.freqdep.replace_with_ladder`), and the errors are
-    those of that ladder circuit, a plain :class:`~pris_cosim.circuit.Circuit`.
+    (:func:`pris_cosim.circuits.freqdep.fit_impedance`,
+    :func:`pris_cosim.circuits.freqdep.replace_with_ladder`), and the errors are
+    those of that ladder circuit, a plain :class:`~pris_cosim.circuits.circuit.Circuit`.
 
     Parameters
     ----------
@@ -583,9 +583,9 @@ def fit_small_transformer_skin(
         ``phase_errors_deg`` (ladder circuit), ``formula_errors_db`` and the
         ladder ``circuits`` (one per load).
     """
-    from pris_cosim.freqdep import fit_impedance
+    from pris_cosim.circuits.freqdep import fit_impedance
 
-    from .parameters import Parameter as EstParameter
+    from estimation.parameters import Parameter as EstParameter
 
     t0 = time.perf_counter()
     sel = {ld: data[ld].select(*band_hz) for ld in SMALL_LOADS}
@@ -645,7 +645,7 @@ def admittance_parameter_set(start: Mapping[str, float], branches: int = 3, fact
 
 def admittance_peaks(frequency_hz: np.ndarray, values: np.ndarray, min_prominence_db: float = 3.0) -> list[float]:
     """Frequencies (Hz) of the peaks of ``|Y|``, refined by a parabola through the top three points (log |Y|)."""
-    from .resonances import find_resonances
+    from estimation.resonances import find_resonances
 
     f = np.asarray(frequency_hz, float)
     db = 20 * np.log10(np.abs(values))
@@ -873,6 +873,6 @@ def _save(fig: Any, path: Path, plt: Any) -> Path:
 
 def _realise_ladder(circuit: Circuit, name: str, ladder: Any) -> Circuit:
     """Replace resistor ``name`` by ``ladder`` (its series inductance stays out of the winding's couplings)."""
-    from pris_cosim.freqdep import replace_with_ladder
+    from pris_cosim.circuits.freqdep import replace_with_ladder
 
     return replace_with_ladder(circuit, name, ladder)

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from .parameters import ParameterSet
+from estimation.parameters import ParameterSet
 
 #: Relative 1-sigma above which a parameter is reported as not identifiable.
 UNCERTAIN = 0.10

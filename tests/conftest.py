@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from pris_cosim import ngspice
-from estimation._threads import single_threaded_blas
+from pris_cosim.circuits import ngspice
+from estimation.search._threads import single_threaded_blas
 from pris_cosim.datafiles import NETLISTS, REAL  # noqa: F401  (REAL: for the tests that import it)
 
 # Under pytest-xdist (``-n 2``) the worker processes share the cores: one BLAS thread each (numpy is loaded by now,

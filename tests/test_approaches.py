@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 
 from estimation import approaches as ap
-from estimation.studies import three_section as three
+from estimation.studies.three_section import cases
+from estimation.studies.three_section import study as three
 from estimation.studies import two_section as two
-from pris_cosim import spectral
-from pris_cosim import timedomain as td
-from pris_cosim.arrangement import SourceSettings
-from pris_cosim.models import get_model
+from pris_cosim.signals import spectral
+from pris_cosim.lab import timedomain as td
+from pris_cosim.circuits.arrangement import SourceSettings
+from pris_cosim.models.builtin import get_model
 
 TWO_SMALL = SourceSettings(vdc=30.0, prbs_order=4, fclk=10e3, rpris=31.8e3, lpris=2.53, cpris=10e-9)
 THREE_SMALL = SourceSettings(vdc=100.0, prbs_order=5, fclk=100e3, rpris=150.0, lpris=4e-3, cpris=1e-6)
@@ -41,7 +42,7 @@ def test_pris_engine_equals_simulate_pris_for_a_population(name, port, settings,
 
 def test_pris_engine_equals_the_fmu(tmp_path):
     """The in-process batched engine and the generated monolithic FMU (fmpy) agree to 1e-9."""
-    from pris_cosim import codegen, cosim, fmi
+    from pris_cosim.fmi import codegen, cosim, build as fmi
 
     circuit = get_model("two-section").circuit
     fs = 10 * TWO_SMALL.fclk
@@ -134,7 +135,7 @@ def three_time():
     params = three.make_params()
     circuit = get_model("three-section").circuit
     w = three.time_target()
-    eng = ap.InjectionEngine(circuit, "n1", w["i_in"], three.FS_TIME)
+    eng = ap.InjectionEngine(circuit, "n1", w["i_in"], cases.FS_TIME)
     v_inj = eng.simulate()[0]  # the target's voltage for the same sampled current
     u0 = params.to_unit({k: three.TARGET[k] for k in three.NAMES})
     return params, eng, w, v_inj, u0

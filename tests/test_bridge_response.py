@@ -10,15 +10,9 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from estimation.bridge_response import (
-    discrete_response,
-    match_modes,
-    model_modes,
-    record_model,
-    zoh_frequency_response,
-    zoh_modes,
-)
-from estimation.local_search import batched_least_squares
+from estimation.bridge_response import (discrete_response, match_modes, model_modes, record_model,
+    zoh_frequency_response, zoh_modes)
+from estimation.search.local_search import batched_least_squares
 
 
 def _series_rlc(r: float, l: float, c: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -5,12 +5,12 @@ import warnings
 import numpy as np
 import pytest
 
-from pris_cosim.circuit import Circuit
+from pris_cosim.circuits.circuit import Circuit
 from pris_cosim.errors import CircuitError, NonPassiveError, NonPassiveWarning
-from pris_cosim.frf import frequency_response
-from pris_cosim.mna import MNA
-from pris_cosim.models import get_model
-from pris_cosim.netlist import parse_netlist, read_netlist
+from pris_cosim.frf.response import frequency_response
+from pris_cosim.circuits.mna import MNA
+from pris_cosim.models.builtin import get_model
+from pris_cosim.circuits.netlist import parse_netlist, read_netlist
 
 
 def rlc() -> Circuit:

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pris_cosim import ngspice
-from pris_cosim.netlist import read_netlist
+from pris_cosim.circuits import ngspice
+from pris_cosim.circuits.netlist import read_netlist
 
 from conftest import needs_ngspice
 
@@ -249,7 +249,7 @@ def _argv(command: str, option: str, value: str, tmp: Path) -> list[str]:
 
 
 def test_every_command_has_a_bad_value_row():
-    from pris_cosim.cli import build_parser
+    from pris_cosim.cli.commands import build_parser
 
     sub = next(a for a in build_parser()._actions if a.dest == "command")
     assert set(sub.choices) == set(_BASES)

@@ -14,9 +14,9 @@ import sys
 import mpmath as mp
 import pytest
 
-from pris_cosim.conditioning import check_response_set
+from pris_cosim.circuits.conditioning import check_response_set
 from pris_cosim.errors import CircuitError
-from pris_cosim.models import get_model
+from pris_cosim.models.builtin import get_model
 
 FREQS = [10.0, 1e3, 1e5, 1e6]
 
@@ -96,8 +96,8 @@ def test_extreme_values_right_or_refused(tmp_path, name):
 
 def test_refused_case_really_is_wrong_without_the_check():
     """The refusal is not over-cautious: unchecked, the damping of that circuit comes out wrong."""
-    from pris_cosim.frf import frequency_response
-    from pris_cosim.netlist import parse_netlist
+    from pris_cosim.frf.response import frequency_response
+    from pris_cosim.circuits.netlist import parse_netlist
 
     text, port, _ = CASES["tiny_R_series"]
     z = frequency_response(parse_netlist(text), port, [1e5])["Zin"][0]
@@ -116,9 +116,9 @@ def test_built_in_models_pass_the_check(model):
 
 
 def test_check_names_the_element():
-    from pris_cosim.models import Configuration, ResponseSet
-    from pris_cosim.frf import Response
-    from pris_cosim.netlist import parse_netlist
+    from pris_cosim.models.builtin import Configuration, ResponseSet
+    from pris_cosim.frf.response import Response
+    from pris_cosim.circuits.netlist import parse_netlist
 
     c = parse_netlist(CASES["tiny_R_series"][0])
     rs = ResponseSet(c, [Configuration("x", "n1", (), (Response("Zin"),))])

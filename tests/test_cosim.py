@@ -11,11 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pris_cosim import cli, cli_sim, cosim, fmi
-from pris_cosim import timedomain as td
-from pris_cosim.arrangement import SourceSettings
-from pris_cosim.measured import read_waveform_csv
-from pris_cosim.models import get_model
+from pris_cosim.cli import commands as cli
+from pris_cosim.cli import sim as cli_sim
+from pris_cosim.fmi import cosim, build as fmi
+from pris_cosim.lab import timedomain as td
+from pris_cosim.circuits.arrangement import SourceSettings
+from pris_cosim.measured.formats import read_waveform_csv
+from pris_cosim.models.builtin import get_model
 
 THREE = SourceSettings(vdc=100.0, prbs_order=6, fclk=100e3, rpris=150.0, lpris=4e-3, cpris=1e-6)
 FS = 10e6
@@ -153,7 +155,7 @@ def test_console_script_prints_one_json_object(tmp_path):
     """Through a real process (python -m pris_cosim), when the lead has registered the commands."""
     if "simulate" not in next(a for a in cli.build_parser()._actions
                               if isinstance(a, argparse._SubParsersAction)).choices:
-        pytest.skip("simulate is not registered in pris_cosim.cli.build_parser yet")
+        pytest.skip("simulate is not registered in pris_cosim.cli.commands.build_parser yet")
     proc = subprocess.run([sys.executable, "-m", "pris_cosim", *SIM, "--out", str(tmp_path / "w.csv"), "--json"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr

@@ -11,13 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pris_cosim import cli, cli_sim, codegen, cosim, fmi
-from pris_cosim import timedomain as td
-from pris_cosim.arrangement import SourceSettings
-from pris_cosim.circuit import Circuit
-from pris_cosim.cosim_exact import cosimulate_exact
-from pris_cosim.measured import read_waveform_csv
-from pris_cosim.models import get_model
+from pris_cosim.cli import commands as cli
+from pris_cosim.cli import sim as cli_sim
+from pris_cosim.fmi import codegen, cosim, build as fmi
+from pris_cosim.lab import timedomain as td
+from pris_cosim.circuits.arrangement import SourceSettings
+from pris_cosim.circuits.circuit import Circuit
+from pris_cosim.fmi.cosim_exact import cosimulate_exact
+from pris_cosim.measured.formats import read_waveform_csv
+from pris_cosim.models.builtin import get_model
 
 THREE = SourceSettings(vdc=100.0, prbs_order=6, fclk=100e3, rpris=150.0, lpris=4e-3, cpris=1e-6)
 FS = 10e6

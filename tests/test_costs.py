@@ -6,19 +6,10 @@ import numpy as np
 import pytest
 
 from estimation import costs
-from estimation.costs import (
-    TABLE_5_1_BANDS,
-    CorrelationCost,
-    CostFunction,
-    Decomposer,
-    EMDCost,
-    IEMDCost,
-    LogMagnitudeCost,
-    TimeCost,
-    WNRMSECost,
-)
+from estimation.costs import (TABLE_5_1_BANDS, CorrelationCost, CostFunction, Decomposer, EMDCost, IEMDCost,
+    LogMagnitudeCost, TimeCost, WNRMSECost)
 from estimation.parameters import ParameterSet
-from pris_cosim.models import get_model
+from pris_cosim.models.builtin import get_model
 
 Y = np.array([1.0, 2.0, 3.0, 4.0])
 YT = np.array([1.0, 2.0, 3.0, 6.0])

@@ -12,9 +12,9 @@ import pytest
 
 from estimation.diagnosis import DiagnosisError, diagnose_frequency
 from estimation.diagnosis.report import write_report
-from pris_cosim.measured import read_multisegment_csv
-from pris_cosim.models import get_model
-from pris_cosim.netlist import parse_netlist
+from pris_cosim.measured.formats import read_multisegment_csv
+from pris_cosim.models.builtin import get_model
+from pris_cosim.circuits.netlist import parse_netlist
 
 from conftest import REAL as REAL_DIR
 from hidden_cases import one_port_case
@@ -95,8 +95,8 @@ def test_cli_bad_input_one_line(tmp_path):
 @pytest.mark.slow
 def test_extended_model_is_simulable_and_an_fmu(real_short, tmp_path):
     """The frequency-dependent extension is realised as a circuit: exact time stepping and an FMU build work."""
-    from pris_cosim import codegen, fmi
-    from pris_cosim.timedomain import simulate_current_injection
+    from pris_cosim.fmi import codegen, build as fmi
+    from pris_cosim.lab.timedomain import simulate_current_injection
 
     d = diagnose_frequency(real_short.frequency_hz, real_short.responses, progress=False)
     ladder = d.realisation["circuit"]

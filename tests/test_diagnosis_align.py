@@ -12,9 +12,9 @@ import pytest
 
 from estimation.diagnosis.align import aligned_start, port_modes
 from estimation.diagnosis.fit import FrequencyFit
-from pris_cosim.frf import Response
-from pris_cosim.models import Configuration
-from pris_cosim.netlist import parse_netlist
+from pris_cosim.frf.response import Response
+from pris_cosim.models.builtin import Configuration
+from pris_cosim.circuits.netlist import parse_netlist
 
 R, L, C1, C2 = 2.0, 1.0e-3, 0.5e-9, 2.0e-9
 

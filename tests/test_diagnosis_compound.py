@@ -10,7 +10,7 @@ import pytest
 
 from estimation.diagnosis import diagnose_frequency
 from hidden_cases import design_case
-from pris_cosim.netlist import parse_netlist
+from pris_cosim.circuits.netlist import parse_netlist
 
 
 def _diagnose(causes, seed, **kw):

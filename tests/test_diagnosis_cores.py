@@ -128,7 +128,7 @@ import json, sys
 sys.path[:0] = [{tests!r}, {root!r}]
 import hidden_cases as hc
 from estimation.diagnosis import diagnose_frequency
-from pris_cosim.netlist import parse_netlist
+from pris_cosim.circuits.netlist import parse_netlist
 
 case = hc.one_port_case(("skin-effect",), 7, sections=5)
 d = diagnose_frequency(case.frequency_hz, case.measured, circuit=parse_netlist(case.baseline_netlist), port="n1",

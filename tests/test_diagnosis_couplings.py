@@ -3,8 +3,8 @@
 import numpy as np
 
 from estimation.diagnosis.fit import FrequencyFit
-from estimation.diagnosis.sections import coupling_decay, find_chains, split_section
-from pris_cosim.models import get_model
+from estimation.diagnosis.causes.sections import coupling_decay, find_chains, split_section
+from pris_cosim.models.builtin import get_model
 
 
 def _fit(model, couplings=(), effects=()):

@@ -18,10 +18,10 @@ import pris_cosim
 from estimation.diagnosis import diagnose_frequency
 from estimation.diagnosis.fit import FrequencyFit
 from estimation.diagnosis.prior import design_prior
-from pris_cosim.frf import Response
-from pris_cosim.measured import load_measured
-from pris_cosim.models import Configuration
-from pris_cosim.netlist import parse_netlist, read_netlist
+from pris_cosim.frf.response import Response
+from pris_cosim.measured.formats import load_measured
+from pris_cosim.models.builtin import Configuration
+from pris_cosim.circuits.netlist import parse_netlist, read_netlist
 
 DATA = Path(pris_cosim.__file__).parent / "data" / "diagnosis_examples"
 CASES = {c["data"].removesuffix(".csv"): c for c in json.loads((DATA / "cases.json").read_text())["cases"]}
@@ -101,7 +101,7 @@ def test_cli_reads_tolerance_and_values_with_suffixes(tmp_path):
     out = json.loads(proc.stdout)
     assert out["cause"] == "none" and out["drift"] == [] and out["tolerance"] == 0.2
     from estimation.diagnosis.cli import _tolerance
-    from pris_cosim.cli_sim import si_value as _value
+    from pris_cosim.cli.sim import si_value as _value
 
     assert _value("4m") == pytest.approx(4e-3) and _value("1u") == pytest.approx(1e-6) and _value("1e-6") == 1e-6
     assert math.isinf(_tolerance("inf")) and _tolerance("20%") == pytest.approx(0.2)

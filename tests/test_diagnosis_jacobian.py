@@ -11,12 +11,12 @@ import hidden_cases as hc
 import numpy as np
 import pytest
 
-from estimation.diagnosis import catalogue as cat
+from estimation.diagnosis.causes import catalogue as cat
 from estimation.diagnosis.fit import FrequencyFit
 from estimation.diagnosis.prior import DesignPrior
-from pris_cosim.frf import Response
-from pris_cosim.models import Configuration, get_model
-from pris_cosim.netlist import parse_netlist
+from pris_cosim.frf.response import Response
+from pris_cosim.models.builtin import Configuration, get_model
+from pris_cosim.circuits.netlist import parse_netlist
 
 
 def _central(fit: FrequencyFit, x: np.ndarray, h: float) -> np.ndarray:

@@ -4,9 +4,9 @@ Thesis chapter 5's question (what the lumped model lacks), asked as a user
 would: ``pris-cosim lab --model hv-6section-freqdep --quick`` records the
 passive 6-section transformer with a skin effect, a core loss and a
 magnetising change written in as passive R-L ladders fitted to the thesis's
-(2.4)-(2.6) (:mod:`pris_cosim.freqdep`), through the PRIS chain with its
+(2.4)-(2.6) (:mod:`pris_cosim.circuits.freqdep`), through the PRIS chain with its
 noise and quantisation; ``pris-cosim diagnose --model hv-6section-passive``
-then fits the catalogue's forms (:mod:`estimation.diagnosis.catalogue`),
+then fits the catalogue's forms (:mod:`estimation.diagnosis.causes.catalogue`),
 none of which is a ladder.
 """
 

@@ -10,7 +10,7 @@ against the closed form, not against the catalogue's own code.
 
 import numpy as np
 
-from estimation.diagnosis.catalogue import MAX_PERMEABILITY_EXPONENT, MagnetisingInductance
+from estimation.diagnosis.causes.catalogue import MAX_PERMEABILITY_EXPONENT, MagnetisingInductance
 
 
 def _lamination_permeability(f_over_fe: np.ndarray) -> np.ndarray:

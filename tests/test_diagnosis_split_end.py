@@ -12,11 +12,11 @@ import pytest
 
 from estimation.diagnosis.fit import FrequencyFit
 from estimation.diagnosis.prior import design_prior
-from estimation.diagnosis.sections import coupling_decay, find_chains, split_section
-from estimation.diagnosis.unmerge import Unmerged
-from pris_cosim.frf import Response
-from pris_cosim.models import Configuration
-from pris_cosim.netlist import parse_netlist
+from estimation.diagnosis.causes.sections import coupling_decay, find_chains, split_section
+from estimation.diagnosis.causes.unmerge import Unmerged
+from pris_cosim.frf.response import Response
+from pris_cosim.models.builtin import Configuration
+from pris_cosim.circuits.netlist import parse_netlist
 
 NET = """* three sections, the last one ending at ground
 R1 n1 x1 0.5

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from estimation.diagnosis import diagnose_frequency
-from estimation.diagnosis.catalogue import (CoreLoss, MagnetisingInductance, SkinEffect, effect_variants,
-                                            winding_groups)
-from pris_cosim.frf import Response, ResponseModel
-from pris_cosim.models import get_model
-from pris_cosim.netlist import parse_netlist
+from estimation.diagnosis.causes.catalogue import (CoreLoss, MagnetisingInductance, SkinEffect, effect_variants,
+    winding_groups)
+from pris_cosim.frf.response import Response, ResponseModel
+from pris_cosim.models.builtin import get_model
+from pris_cosim.circuits.netlist import parse_netlist
 
 from detectability import best_baseline_fit
 from hidden_cases import one_port_case

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from estimation.diagnosis.fit import DiagnosisError
-from estimation.diagnosis.waveform import _Input, _simulate_one, _Structure, diagnose_waveforms
-from estimation.diagnosis.waveform_report import write_report
-from estimation.diagnosis.waveform_synthetic import NOMINAL, simulate_source, thesis_case, waveform_case
-from pris_cosim.measured import Waveforms, write_waveform_csv
+from estimation.diagnosis.waveform.source import _Input, _simulate_one, _Structure, diagnose_waveforms
+from estimation.diagnosis.waveform.report import write_report
+from estimation.diagnosis.waveform.synthetic import NOMINAL, simulate_source, thesis_case, waveform_case
+from pris_cosim.measured.formats import Waveforms, write_waveform_csv
 
 KEYS = {"cause", "candidates", "baseline_cost", "extended_cost", "gain"}
 
@@ -225,7 +225,7 @@ def test_non_positive_nominal(clean):
 @pytest.mark.slow
 def test_series_resistance_and_switch_parasitics_both_named():
     """A source with 2 Ohm more in series and switch parasitics (10.4 uH, 0.463 nF), simulated by
-    pris_cosim.timedomain.simulate_pris (not the diagnosis's modal simulation), 0.3 % noise."""
+    pris_cosim.lab.timedomain.simulate_pris (not the diagnosis's modal simulation), 0.3 % noise."""
     rng = np.random.default_rng(5)
     sim = simulate_source(57.1 + 2.0, 1e-3, 4e-6, 15.3, 10e6, lsw=10.4e-6, csw=0.463e-9)
     noisy = {s: sim[s] + 0.003 * np.sqrt(np.mean(sim[s] ** 2)) * rng.standard_normal(sim[s].size)
@@ -245,7 +245,7 @@ def test_series_resistance_and_switch_parasitics_both_named():
 
 def test_noise_floor_from_the_record():
     """The record's own noise estimate against the 0.3 % of signal RMS added here (clean and ringing sources)."""
-    from estimation.diagnosis.waveform import waveform_noise
+    from estimation.diagnosis.waveform.source import waveform_noise
 
     rng = np.random.default_rng(1)
     for par in ({}, {"lsw": 10.4e-6, "csw": 0.463e-9}):

@@ -8,12 +8,8 @@ import pytest
 from estimation.diagnosis import DiagnosisError, diagnose_frequency
 from estimation.diagnosis.evidence import noise_floor, noise_weights
 from estimation.diagnosis.fit import FrequencyFit
-from estimation.diagnosis.unmerge import (
-    MAX_RESONANCE_SD,
-    missing_modes,
-    resolved_points,
-)
-from pris_cosim.models import get_model
+from estimation.diagnosis.causes.unmerge import MAX_RESONANCE_SD, missing_modes, resolved_points
+from pris_cosim.models.builtin import get_model
 
 
 def _rlc(f: np.ndarray) -> np.ndarray:

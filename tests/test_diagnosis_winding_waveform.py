@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from conftest import needs_ngspice
-from estimation.diagnosis.winding_waveform import diagnose_winding_waveforms, winding_impedance
-from pris_cosim.measured import Waveforms
-from pris_cosim.models import get_model
-from pris_cosim.netlist import parse_netlist
+from estimation.diagnosis.waveform.winding import diagnose_winding_waveforms, winding_impedance
+from pris_cosim.measured.formats import Waveforms
+from pris_cosim.models.builtin import get_model
+from pris_cosim.circuits.netlist import parse_netlist
 
 FS = 11e6
 
@@ -35,8 +35,8 @@ def _winding(core_loss: bool = False):
 
 
 def _record(core_loss: bool = False) -> Waveforms:
-    from pris_cosim import timedomain as td
-    from pris_cosim.arrangement import SourceSettings
+    from pris_cosim.lab import timedomain as td
+    from pris_cosim.circuits.arrangement import SourceSettings
 
     src = SourceSettings(vdc=100.0, prbs_order=8, fclk=100e3, rpris=150.0, lpris=4e-3, cpris=1e-6)
     rec = td.pris_ngspice(_winding(core_loss), "n1", src, FS, periods=2, max_step=0.25 / FS)

@@ -20,7 +20,7 @@ import pytest
 
 from estimation import cli
 from estimation.parameters import ParameterSet
-from pris_cosim.models import get_model
+from pris_cosim.models.builtin import get_model
 
 
 # ---------------------------------------------------------------- independent reference solver

@@ -1,7 +1,7 @@
 """FMUs in the estimation loop, and replaying sampled records without bias.
 
 Targets come from the prebuilt FMUs run by fmpy's own ``simulate_fmu``
-(:class:`pris_cosim.cosim.FmuRunner`) and from ngspice, not from the code
+(:class:`pris_cosim.fmi.cosim.FmuRunner`) and from ngspice, not from the code
 under test.
 """
 
@@ -19,11 +19,11 @@ from conftest import needs_ngspice
 from estimation import approaches as ap
 from estimation.cli import run_estimate
 from estimation.drives import RecordBridgeEngine
-from estimation.fmu_model import FmuModel
-from pris_cosim.arrangement import SourceSettings
-from pris_cosim.cosim import FmuRunner
-from pris_cosim.models import get_model
-from pris_cosim.thesis_cases import THREE_SECTION, TWO_SECTION
+from estimation.fmu.model import FmuModel
+from pris_cosim.circuits.arrangement import SourceSettings
+from pris_cosim.fmi.cosim import FmuRunner
+from pris_cosim.models.builtin import get_model
+from pris_cosim.fmi.thesis_cases import THREE_SECTION, TWO_SECTION
 
 REPO = Path(__file__).resolve().parents[1]
 TWO_PRIS = REPO / "fmus" / "two-section" / "two_section_pris.fmu"
@@ -88,7 +88,7 @@ def test_truth_scores_on_fmu_records_at_1mhz(name, fmu, port, case, duration):
 ])
 @pytest.mark.slow
 def test_truth_scores_on_ngspice_records(name, port, settings, max_step, fs):
-    from pris_cosim import timedomain as td
+    from pris_cosim.lab import timedomain as td
 
     circuit = get_model(name).circuit
     w = td.pris_ngspice(circuit, port, settings, fs, periods=1, max_step=max_step)
@@ -102,7 +102,7 @@ def test_truth_scores_on_ngspice_records(name, port, settings, max_step, fs):
 
 def test_linear_hold_is_exact_for_a_ramp_into_parallel_rc():
     """Closed form: i(t) = a t into R || C from rest gives v = a R (t - tau (1 - exp(-t / tau)))."""
-    from pris_cosim.circuit import Circuit
+    from pris_cosim.circuits.circuit import Circuit
 
     c = Circuit(title="RC")
     c.add("R1", "a", "0", 1e3)
@@ -181,7 +181,7 @@ def test_fmu_estimate_other_approaches_with_a_current_input(tmp_path, approach):
 
 
 def test_fmi3_fmu_in_the_loop(tmp_path):
-    from pris_cosim import fmi
+    from pris_cosim.fmi import build as fmi
 
     settings = SourceSettings(vdc=100.0, prbs_order=6, fclk=100e3, rpris=150.0, lpris=4e-3, cpris=1e-6)
     paths = fmi.build_pris_fmus(get_model("three-section").circuit, "n1", tmp_path / "f3", settings, name="three",
@@ -217,7 +217,7 @@ def test_bad_fmu_config_one_line(tmp_path, two_record, change, needle):
     cfg.update(change)
     p = tmp_path / "c.json"
     p.write_text(json.dumps(cfg))
-    r = subprocess.run([sys.executable, "-m", "pris_cosim.cli", "estimate", "--config", str(p), "--out",
+    r = subprocess.run([sys.executable, "-m", "pris_cosim.cli.commands", "estimate", "--config", str(p), "--out",
                         str(tmp_path / "o")], capture_output=True, text=True, timeout=120, cwd=REPO)
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and needle in r.stderr, r.stderr

@@ -35,7 +35,7 @@ def built(tmp_path_factory):
 def _estimate(cfg: dict, tmp: Path) -> dict:
     path = tmp / "cfg.json"
     path.write_text(json.dumps(cfg))
-    p = subprocess.run([sys.executable, "-m", "pris_cosim.cli", "estimate", "--config", str(path), "--json",
+    p = subprocess.run([sys.executable, "-m", "pris_cosim.cli.commands", "estimate", "--config", str(path), "--json",
                         "--quiet", "--out", str(tmp / "out"), "--workers", "2"], cwd=REPO, capture_output=True,
                        text=True)
     line = next((ln for ln in p.stdout.splitlines() if ln.startswith("{")), None)
@@ -58,7 +58,7 @@ def _cfg(name: str, fmu: Path, rec: Path, free: dict[str, tuple[float, float]]) 
 @pytest.mark.parametrize("name", sorted(ff.MODELS))
 def test_held_record_replays_exactly_at_the_truth(built, tmp_path, name):
     """A held PRBS input is read as held (zero-order hold) and the truth then replays the record to 1e-9."""
-    from estimation.fmu_model import FmuModel
+    from estimation.fmu.model import FmuModel
     from estimation.holds import decide_hold
 
     m = ff.MODELS[name]

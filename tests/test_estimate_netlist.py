@@ -40,7 +40,7 @@ def test_netlist_matches_builtin_model(netlist_dir):
 def test_unknown_port_one_line(tmp_path, netlist_dir):
     p = tmp_path / "c.json"
     p.write_text(json.dumps(_cfg(netlist_dir, port="nowhere")))
-    r = subprocess.run([sys.executable, "-m", "pris_cosim.cli", "estimate", "--config", str(p)],
+    r = subprocess.run([sys.executable, "-m", "pris_cosim.cli.commands", "estimate", "--config", str(p)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "nowhere" in r.stderr
@@ -59,9 +59,10 @@ SOURCE9 = {"vdc": 30.0, "prbs_order": 9, "fclk": 10e3, "rpris": 31.8e3, "lpris":
 @pytest.fixture(scope="module")
 def ngspice_record(tmp_path_factory, netlist_dir):
     """The two-section netlist in the PRIS arrangement simulated by ngspice (independent of the estimator), 1 MHz."""
-    from pris_cosim import ngspice, timedomain as td
-    from pris_cosim.arrangement import SourceSettings
-    from pris_cosim.netlist import read_netlist
+    from pris_cosim.circuits import ngspice
+    from pris_cosim.lab import timedomain as td
+    from pris_cosim.circuits.arrangement import SourceSettings
+    from pris_cosim.circuits.netlist import read_netlist
 
     if not ngspice.available():
         pytest.skip("ngspice is not installed")
@@ -97,7 +98,7 @@ def test_bridge_drive_without_source_one_line(tmp_path, netlist_dir):
     cfg = _cfg(netlist_dir, approach="time", drive="bridge", target={"kind": "waveforms-csv", "path": str(rec)})
     p = tmp_path / "c.json"
     p.write_text(json.dumps(cfg))
-    r = subprocess.run([sys.executable, "-m", "pris_cosim.cli", "estimate", "--config", str(p)],
+    r = subprocess.run([sys.executable, "-m", "pris_cosim.cli.commands", "estimate", "--config", str(p)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "source" in r.stderr

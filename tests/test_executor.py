@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from estimation import executor as ex
-from estimation import optimisers as opt
-from estimation.executor import ResultsStore, Task, TaskError, run_tasks
+from estimation.search import executor as ex
+from estimation.search import optimisers as opt
+from estimation.search.executor import ResultsStore, Task, TaskError, run_tasks
 
 # --------------------------------------------------------------------------- #
 # Task functions: top level, so workers can import them by name
@@ -516,7 +516,7 @@ def test_ctrl_c_to_the_group_stops_with_one_line_and_resume_gives_the_same_answe
 
 _SHARE = """
 import json, sys
-from estimation.executor import run_tasks
+from estimation.search.executor import run_tasks
 from test_executor import counted_tasks
 from pathlib import Path
 results = run_tasks(counted_tasks(Path(sys.argv[1]), 6, delay=0.3), executor="serial", store=sys.argv[2])

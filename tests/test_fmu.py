@@ -14,13 +14,13 @@ import scipy.linalg
 from fmpy.model_description import read_model_description
 from fmpy.validation import validate_fmu
 
-from pris_cosim import codegen, cosim, fmi
-from pris_cosim import timedomain as td
-from pris_cosim.arrangement import BRIDGE, SourceSettings, pris_arrangement
+from pris_cosim.fmi import codegen, cosim, build as fmi
+from pris_cosim.lab import timedomain as td
+from pris_cosim.circuits.arrangement import BRIDGE, SourceSettings, pris_arrangement
 from pris_cosim.errors import NonPassiveError
-from pris_cosim.mna import MNA
-from pris_cosim.models import get_model
-from pris_cosim.signals import LFSR, lfsr_prbs
+from pris_cosim.circuits.mna import MNA
+from pris_cosim.models.builtin import get_model
+from pris_cosim.signals.perturbation import LFSR, lfsr_prbs
 
 THREE = SourceSettings(vdc=100.0, prbs_order=6, fclk=100e3, rpris=150.0, lpris=4e-3, cpris=1e-6)
 TWO = SourceSettings(vdc=30.0, prbs_order=4, fclk=10e3, rpris=31.8e3, lpris=2.53, cpris=10e-9)
@@ -286,7 +286,7 @@ def test_c_expm_equals_scipy_on_pris_discretisation(c_expm, h):
 
 def test_parameter_ties_are_evaluated_in_the_fmu(tmp_path):
     """A tied parameter is a calculatedParameter; changing its base re-evaluates the tie in C."""
-    from pris_cosim.circuit import Circuit
+    from pris_cosim.circuits.circuit import Circuit
 
     c = Circuit(title="tied RLC", ports=["a"], probes=["b"])
     c.add_parameter("R0", 1e3, "Ohm")

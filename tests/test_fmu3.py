@@ -13,9 +13,9 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 
-from pris_cosim import fmi
-from pris_cosim.arrangement import SourceSettings
-from pris_cosim.models import get_model
+from pris_cosim.fmi import build as fmi
+from pris_cosim.circuits.arrangement import SourceSettings
+from pris_cosim.models.builtin import get_model
 
 THREE = SourceSettings(vdc=100.0, prbs_order=6, fclk=100e3, rpris=150.0, lpris=4e-3, cpris=1e-6)
 

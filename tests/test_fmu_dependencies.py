@@ -22,9 +22,9 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Model
 
-from pris_cosim import codegen, fmi
-from pris_cosim.arrangement import SourceSettings
-from pris_cosim.circuit import Circuit
+from pris_cosim.fmi import codegen, build as fmi
+from pris_cosim.circuits.arrangement import SourceSettings
+from pris_cosim.circuits.circuit import Circuit
 
 PARASITIC = SourceSettings(vdc=100.0, prbs_order=5, fclk=100e3, rpris=150.0, lpris=4e-3, cpris=1e-6,
                            rsnub=50.0, csnub=2e-9, lsw=1e-6, csw=1e-10)

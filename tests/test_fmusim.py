@@ -56,7 +56,7 @@ def test_fmusim_runs_every_shipped_fmu_as_cs_and_me(tmp_path, fmu):
 
 
 def test_fmusim_runs_fmi3_builds(tmp_path):
-    from pris_cosim.cli import main
+    from pris_cosim.cli.commands import main
 
     assert main(["build-fmu", "--model", "two-section", "--port", "in", "--with-source", "--fmi-version", "3",
                  "--out", str(tmp_path / "fmi3")]) == 0

@@ -3,20 +3,13 @@
 import numpy as np
 import pytest
 
-from pris_cosim import ngspice
-from pris_cosim.circuit import Circuit
+from pris_cosim.circuits import ngspice
+from pris_cosim.circuits.circuit import Circuit
 from pris_cosim.errors import CircuitError
-from pris_cosim.freqdep import (
-    core_loss_resistance,
-    fit_inductance,
-    fit_resistance,
-    magnetising_inductance,
-    replace_with_ladder,
-    skin_resistance,
-    thesis_skin_resistance,
-)
-from pris_cosim.frf import frequency_response, logspace_hz
-from pris_cosim.models import get_model
+from pris_cosim.circuits.freqdep import (core_loss_resistance, fit_inductance, fit_resistance,
+    magnetising_inductance, replace_with_ladder, skin_resistance, thesis_skin_resistance)
+from pris_cosim.frf.response import frequency_response, logspace_hz
+from pris_cosim.models.builtin import get_model
 
 from conftest import needs_ngspice
 
@@ -92,7 +85,7 @@ def test_extended_circuit_against_ngspice():
 
 def test_packaged_unit_ladders_equal_a_fresh_fit():
     """The ladders kept with the package (no optimiser at start-up) are the ones the fit gives now."""
-    from pris_cosim.freqdep import TransformerEffects, fit_unit_ladders, unit_ladders
+    from pris_cosim.circuits.freqdep import TransformerEffects, fit_unit_ladders, unit_ladders
 
     f = np.logspace(0, 5.3, 60)
     for kept, fresh in zip(unit_ladders(TransformerEffects()), fit_unit_ladders(TransformerEffects())):

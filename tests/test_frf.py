@@ -9,10 +9,10 @@ the orders of (2.2)/(2.3) for N-section cascades.
 import numpy as np
 import pytest
 
-from pris_cosim import ngspice
-from pris_cosim.frf import ResponseModel, frequency_response, logspace_hz
-from pris_cosim.models import cascade, get_model
-from pris_cosim.netlist import read_netlist
+from pris_cosim.circuits import ngspice
+from pris_cosim.frf.response import ResponseModel, frequency_response, logspace_hz
+from pris_cosim.models.builtin import cascade, get_model
+from pris_cosim.circuits.netlist import read_netlist
 
 from conftest import needs_ngspice
 

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from pris_cosim.errors import CircuitError
-from pris_cosim.frf_groups import GroupedResponseSet
-from pris_cosim.frf_kernels import pole_residue_sum
-from pris_cosim.models import get_model
+from pris_cosim.models.groups import GroupedResponseSet
+from pris_cosim.frf.kernels import pole_residue_sum
+from pris_cosim.models.builtin import get_model
 
 
 @pytest.mark.parametrize("name", ["hv-4section", "hv-6section-passive", "hv-4section-cab2b"])

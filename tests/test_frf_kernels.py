@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pris_cosim import frf_kernels as K
+from pris_cosim.frf import kernels as K
 
 
 def _random_stable(rng: np.random.Generator, P: int, n: int) -> tuple[np.ndarray, ...]:

@@ -93,7 +93,7 @@ def test_fuzzed_values_and_expressions(text):
 @given(a=st.floats(allow_nan=True, allow_infinity=True), b=st.floats(allow_nan=True, allow_infinity=True),
        op=st.sampled_from(["+", "-", "*", "/", "**"]))
 def test_expression_arithmetic_is_finite_or_one_line(a, b, op):
-    from pris_cosim.expressions import Expression
+    from pris_cosim.circuits.expressions import Expression
 
     verdict = fc.judge_call(lambda: float(Expression(f"{{x {op} y}}").evaluate({"x": a, "y": b})), [],
                             check=lambda v: v == v and abs(v) != float("inf"))

@@ -50,7 +50,7 @@ class Outcome:
 
 def run_cli(argv: Sequence[str], timeout_s: float = 30.0) -> Outcome:
     """Run ``pris-cosim argv`` in this process with a time limit; never raises."""
-    from pris_cosim.cli import main
+    from pris_cosim.cli.commands import main
 
     out, err = io.StringIO(), io.StringIO()
 
@@ -488,7 +488,7 @@ def finite_result(result: Any) -> bool:
 
 def check_measured(path: Path) -> str:
     """Verdict of reading one measured-data file through the public reader."""
-    from pris_cosim.measured import load_measured
+    from pris_cosim.measured.formats import load_measured
 
     return judge_call(lambda: load_measured(path), [str(path)], check=finite_result)
 
@@ -503,7 +503,7 @@ def check_value(text: str) -> str:
     """Verdict of parsing a value as a number and as an expression (finite float or one-line ValueError)."""
     import math
 
-    from pris_cosim.expressions import Expression
+    from pris_cosim.circuits.expressions import Expression
     from pris_cosim.units import parse_value
 
     def both() -> float:

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from estimation.studies import hv_transformer as hv
-from pris_cosim import ngspice
-from pris_cosim.circuit import Circuit
-from pris_cosim.cli import main
-from pris_cosim.freqdep import TransformerEffects, add_transformer_effects, core_loss_resistance
-from pris_cosim.frf import frequency_response, logspace_hz
-from pris_cosim.measured import MeasuredResponses, read_response_csv, write_response_csv
-from pris_cosim.models import get_model
+from pris_cosim.circuits import ngspice
+from pris_cosim.circuits.circuit import Circuit
+from pris_cosim.cli.commands import main
+from pris_cosim.circuits.freqdep import TransformerEffects, add_transformer_effects, core_loss_resistance
+from pris_cosim.frf.response import frequency_response, logspace_hz
+from pris_cosim.measured.formats import MeasuredResponses, read_response_csv, write_response_csv
+from pris_cosim.models.builtin import get_model
 
 from conftest import needs_ngspice
 from readme_commands import readme_command, run_readme_command

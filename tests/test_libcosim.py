@@ -5,7 +5,7 @@ the FMI Library, steps them on an integer nanosecond clock and couples them
 with its fixed-step (Jacobi) master. These tests keep to FMI 2.0 there:
 libcosim has no FMI 3.0 support, and libcosimpy ends the process when an FMI
 3.0 FMU is added. Each libcosim run happens in a subprocess
-(``python -m pris_cosim.libcosim_run``), so that a crash in the library
+(``python -m pris_cosim.fmi.libcosim_run``), so that a crash in the library
 fails one test instead of ending the test session.
 """
 
@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from fmpy.model_description import read_model_description
 
-from pris_cosim import cosim, libcosim_run, ssp
-from pris_cosim.cosim_exact import cosimulate_exact
+from pris_cosim.fmi import cosim, libcosim_run, ssp
+from pris_cosim.fmi.cosim_exact import cosimulate_exact
 
 pytestmark = pytest.mark.skipif(
     not libcosim_run.available(),
@@ -36,7 +36,7 @@ THREE = ROOT / "fmus" / "three-section"
 
 def libcosim(tmp_path: Path, *args: str) -> dict[str, np.ndarray]:
     out = tmp_path / f"libcosim-{len(list(tmp_path.glob('libcosim-*')))}.npz"
-    proc = subprocess.run([sys.executable, "-m", "pris_cosim.libcosim_run", *args, "--out", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "pris_cosim.fmi.libcosim_run", *args, "--out", str(out)],
                           capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert proc.returncode == 0, f"libcosim run failed ({proc.returncode}): {proc.stderr[-2000:]}"
     json.loads(proc.stdout.strip().splitlines()[-1])
@@ -147,7 +147,7 @@ def test_fmi3_fmus_are_refused_before_libcosim_sees_them(tmp_path):
     with zipfile.ZipFile(fake, "w") as zf:
         zf.writestr("modelDescription.xml", '<?xml version="1.0"?><fmiModelDescription fmiVersion="3.0" '
                                             'modelName="m" instantiationToken="x"/>')
-    proc = subprocess.run([sys.executable, "-m", "pris_cosim.libcosim_run", "fmu", str(fake), "--stop", "1e-6",
+    proc = subprocess.run([sys.executable, "-m", "pris_cosim.fmi.libcosim_run", "fmu", str(fake), "--stop", "1e-6",
                            "--step-ns", "100", "--out", str(tmp_path / "r.npz")], capture_output=True, text=True,
                           cwd=ROOT)
     assert proc.returncode == 2

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimation.local_search import staged_least_squares
+from estimation.search.local_search import staged_least_squares
 
 
 def _problem(target: np.ndarray, floor: float = 0.0):

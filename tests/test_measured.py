@@ -1,4 +1,4 @@
-"""Tests for pris_cosim.measured: readers, writers, validation, real data."""
+"""Tests for pris_cosim.measured.formats: readers, writers, validation, real data."""
 
 from __future__ import annotations
 
@@ -10,36 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pris_cosim import measured as M
-from pris_cosim import (
-    measured_instruments,
-    measured_response_csv,
-    measured_waveform_csv,
-)
+from pris_cosim.measured import formats as M
+from pris_cosim.measured import (instruments as measured_instruments, response_csv as measured_response_csv,
+    waveform_csv as measured_waveform_csv)
 from pris_cosim.datafiles import REAL
-from pris_cosim.measured import (
-    MeasuredDataError,
-    MeasuredResponses,
-    Waveforms,
-    detect_format,
-    list_segments,
-    load_measured,
-    read_e4990a,
-    read_mag_phase_rows,
-    read_mat,
-    read_multisegment_csv,
-    read_response_csv,
-    read_touchstone_z,
-    read_waveform_csv,
-    segment_info,
-    write_e4990a,
-    write_mag_phase_rows,
-    write_mat,
-    write_multisegment_csv,
-    write_response_csv,
-    write_touchstone_z,
-    write_waveform_csv,
-)
+from pris_cosim.measured.formats import (MeasuredDataError, MeasuredResponses, Waveforms, detect_format,
+    list_segments, load_measured, read_e4990a, read_mag_phase_rows, read_mat, read_multisegment_csv,
+    read_response_csv, read_touchstone_z, read_waveform_csv, segment_info, write_e4990a, write_mag_phase_rows,
+    write_mat, write_multisegment_csv, write_response_csv, write_touchstone_z, write_waveform_csv)
 
 DATA = Path(__file__).resolve().parent / "data" / "measured"
 
@@ -448,7 +426,7 @@ def test_failed_write_leaves_original_intact(tmp_path, monkeypatch, writer):
 
 def test_failed_touchstone_write_leaves_original_intact(tmp_path, monkeypatch):
     """Touchstone text comes from scikit-rf; a failure while it is written keeps the target."""
-    from pris_cosim import touchstone as T
+    from pris_cosim.measured import touchstone as T
 
     target = tmp_path / "target.s1p"
     original = b"original content\n"

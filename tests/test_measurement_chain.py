@@ -15,11 +15,11 @@ import pytest
 from scipy import signal
 
 from estimation import approaches as ap
-from estimation.local_search import profile_scan, sloppiest_parameter
-from estimation.studies import three_section as three
-from pris_cosim import virtual_lab as vl
-from pris_cosim.arrangement import SourceSettings
-from pris_cosim.models import get_model
+from estimation.search.local_search import profile_scan, sloppiest_parameter
+from estimation.studies.three_section import study as three
+from pris_cosim.lab import virtual_lab as vl
+from pris_cosim.circuits.arrangement import SourceSettings
+from pris_cosim.models.builtin import get_model
 
 SOURCE = SourceSettings(vdc=100.0, prbs_order=6, fclk=100e3, rpris=150.0, lpris=4e-3, cpris=1e-6)
 

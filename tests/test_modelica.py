@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pris_cosim import codegen
-from pris_cosim import timedomain as td
-from pris_cosim.arrangement import SourceSettings
-from pris_cosim.modelica import modelica_text
-from pris_cosim.models import get_model
-from pris_cosim.signals import lfsr_prbs
+from pris_cosim.fmi import codegen
+from pris_cosim.lab import timedomain as td
+from pris_cosim.circuits.arrangement import SourceSettings
+from pris_cosim.fmi.modelica import modelica_text
+from pris_cosim.models.builtin import get_model
+from pris_cosim.signals.perturbation import lfsr_prbs
 
 rumoca = pytest.importorskip("rumoca", reason="no Modelica compiler: pip install rumoca (the 'test' extra)")
 

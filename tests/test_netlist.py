@@ -3,7 +3,7 @@
 import pytest
 
 from pris_cosim.errors import NetlistError
-from pris_cosim.netlist import format_netlist, parse_netlist, read_netlist, write_netlist
+from pris_cosim.circuits.netlist import format_netlist, parse_netlist, read_netlist, write_netlist
 
 REFERENCE = ["two_section_table4_2.cir", "three_section_table4_7.cir", "hv_transformer_4section_table5_4.cir",
              "hv_transformer_6section_table5_12.cir"]
@@ -91,7 +91,7 @@ def test_write_is_atomic(tmp_path, netlist_dir, monkeypatch):
     target = tmp_path / "out.cir"
     target.write_text("old content\n")
     c = read_netlist(netlist_dir / "two_section_table4_2.cir")
-    import pris_cosim.netlist as nl
+    import pris_cosim.circuits.netlist as nl
 
     def fail(src, dst):
         raise OSError("disk full")

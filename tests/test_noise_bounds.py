@@ -10,9 +10,10 @@ from scipy.optimize import least_squares
 
 from estimation import approaches as ap
 from estimation.studies import bounds, cells, modal
-from estimation.studies import three_section as three
+from estimation.studies.three_section import cases
+from estimation.studies.three_section import study as three
 from estimation.studies import two_section as two
-from pris_cosim.models import get_model
+from pris_cosim.models.builtin import get_model
 
 
 def test_success_limit_and_efficiency_follow_the_rule():
@@ -104,11 +105,11 @@ def _bound_and_spread(study, fs: float, n: int, source, draws: int, seed: int):
     u0 = params.to_unit(truth)
     v0 = engine.simulate(params.evaluate(u0[None]).overrides)["v_in"][0]
     sigma = bounds.noise_sigma(v0, 40.0)
-    bound = bounds.cramer_rao(three.BridgeTime(params, engine, v0, "rmse").residuals, params, truth, sigma)
+    bound = bounds.cramer_rao(cases.BridgeTime(params, engine, v0, "rmse").residuals, params, truth, sigma)
     rng = np.random.default_rng(seed)
     errors = []
     for _ in range(draws):
-        a = three.BridgeTime(params, engine, v0 + sigma * rng.standard_normal(v0.size), "rmse")
+        a = cases.BridgeTime(params, engine, v0 + sigma * rng.standard_normal(v0.size), "rmse")
         fit = least_squares(lambda x: a.residuals(np.clip(x, 0, 1)[None])[0], u0, bounds=(0, 1), x_scale="jac",
                             diff_step=1e-7, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         est = params.values(fit.x)
@@ -130,7 +131,7 @@ def test_bound_of_the_ill_conditioned_three_section_record_follows_the_monte_car
     """The three-section winding's voltage record (one PRBS6 period at 11 MHz, 40 dB): its Jacobian spans six
     decades of singular values, and the sloppy combination (Cs, Cg, k12) must get the bound the estimates'
     spread shows (a too coarse difference step once made it 13 times too small). 16 noise draws."""
-    names, bound, spread = _bound_and_spread(three, three.FS_TIME, 6930, three.SOURCE_TIME, 16, 5)
+    names, bound, spread = _bound_and_spread(three, cases.FS_TIME, 6930, three.SOURCE_TIME, 16, 5)
     for k, s in zip(names, spread):
         assert s == pytest.approx(bound[k], rel=0.4), (k, s, bound[k])
 

@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 
-from estimation import optimisers as opt
-from estimation.optimisers import Budget
+from estimation.search import optimisers as opt
+from estimation.search.optimisers import Budget
 
 RASTRIGIN_SHIFT = 1.3  # global minimum at x = 1.3 in [-5.12, 5.12]
 

@@ -5,15 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimation.parameters import (
-    Parameter,
-    ParameterSet,
-    coupling_matrix,
-    engineering_scale,
-    identifiability,
-    shrink_fraction,
-)
-from pris_cosim.models import get_model
+from estimation.parameters import (Parameter, ParameterSet, coupling_matrix, engineering_scale, identifiability,
+    shrink_fraction)
+from pris_cosim.models.builtin import get_model
 
 
 @pytest.fixture(scope="module")

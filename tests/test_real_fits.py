@@ -10,10 +10,10 @@ import pytest
 
 from estimation import real_fits as rf
 from estimation.studies import real_data
-from pris_cosim.frf import ResponseModel
-from pris_cosim.measured import MeasuredDataError, MeasuredResponses
+from pris_cosim.frf.response import ResponseModel
+from pris_cosim.measured.formats import MeasuredDataError, MeasuredResponses
 from pris_cosim.datafiles import REAL
-from pris_cosim.netlist import format_netlist, parse_netlist
+from pris_cosim.circuits.netlist import format_netlist, parse_netlist
 
 SMALL = REAL / rf.SMALL_FILE
 ADMITTANCE = REAL / rf.ADMITTANCE_FILE
@@ -175,7 +175,7 @@ def test_study_quick_writes_json_and_plots(tmp_path, monkeypatch):
 @pytest.mark.slow
 def test_cli_study_real_data(tmp_path, monkeypatch, capsys):
     """``pris-cosim study real-data --json``: one JSON object; a missing data directory exits 2 with one line."""
-    from pris_cosim.cli import main
+    from pris_cosim.cli.commands import main
 
     monkeypatch.setenv(real_data.ENV_VAR, str(tmp_path / "nowhere"))
     assert main(["study", "real-data", "--out", str(tmp_path / "x")]) == 2

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from estimation.parameters import Parameter, ParameterSet
-from estimation.recipe import End, Start, run_recipe
+from estimation.search.recipe import End, Start, run_recipe
 
 
 class LinearKind:

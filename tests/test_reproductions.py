@@ -9,7 +9,7 @@ winding models; the time-domain simulation itself is exact.
 
 import pytest
 
-from pris_cosim import reproductions as rp
+from pris_cosim.lab import reproductions as rp
 
 
 @pytest.fixture(scope="module")

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from estimation.resonances import count_parallel, find_resonances, suggest_sections
-from pris_cosim.frf import ResponseModel, logspace_hz
-from pris_cosim.models import cascade, get_model
+from pris_cosim.frf.response import ResponseModel, logspace_hz
+from pris_cosim.models.builtin import cascade, get_model
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 6])

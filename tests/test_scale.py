@@ -11,11 +11,11 @@ import sys
 import numpy as np
 import pytest
 
-from pris_cosim.frf import ResponseModel, frequency_response
-from pris_cosim.mna import MNA
-from pris_cosim.models import get_model
-from pris_cosim.netlist import parse_netlist
-from pris_cosim.sparse_ac import SPARSE_ABOVE, SparseMNA
+from pris_cosim.frf.response import ResponseModel, frequency_response
+from pris_cosim.circuits.mna import MNA
+from pris_cosim.models.builtin import get_model
+from pris_cosim.circuits.netlist import parse_netlist
+from pris_cosim.frf.sparse_ac import SPARSE_ABOVE, SparseMNA
 
 
 def _rc_chain(n: int, r: float, c: float) -> str:

@@ -18,8 +18,8 @@ from estimation.sfra.indices import band_indices
 from estimation.sfra.sweep import Sweep, load_sweep
 from estimation.sfra.winding import admittance
 from pris_cosim.datafiles import REAL
-from pris_cosim.measured import MeasuredDataError
-from pris_cosim.touchstone import read_touchstone, write_touchstone
+from pris_cosim.measured.formats import MeasuredDataError
+from pris_cosim.measured.touchstone import read_touchstone, write_touchstone
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = REAL / "ipn_winding_interturn"

@@ -1,4 +1,4 @@
-"""Property tests for pris_cosim.signals (PRBS, H-bridge, PRIS, metrics, RLC design)."""
+"""Property tests for pris_cosim.signals.perturbation (PRBS, H-bridge, PRIS, metrics, RLC design)."""
 
 from fractions import Fraction
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import sympy
 
-from pris_cosim import signals as sg
-from pris_cosim.spectral import welch_psd
+from pris_cosim.signals import perturbation as sg
+from pris_cosim.signals.spectral import welch_psd
 
 SMALL_ORDERS = range(2, 17)
 
@@ -356,7 +356,7 @@ def test_prbs_psd_theory_landmarks():
 def test_plot_psd_comparison_draws_one_line_per_curve():
     from matplotlib.figure import Figure
 
-    from pris_cosim.plotting_signals import plot_psd_comparison
+    from pris_cosim.signals.plots import plot_psd_comparison
 
     fs, f_clk = 20e3, 1e3
     ax = Figure().subplots()

@@ -1,4 +1,4 @@
-"""Tests for pris_cosim.spectral.
+"""Tests for pris_cosim.signals.spectral.
 
 References are independent of the module: scipy.signal.welch/csd for the
 wrapped spectra, scipy.signal.freqz for the response of a known discrete
@@ -13,17 +13,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from pris_cosim.spectral import (
-    DEFAULT_OVERLAP,
-    FrequencyResponse,
-    coherence,
-    cross_psd,
-    estimate_response,
-    log_resample,
-    synthesise_two_clock,
-    tfestimate,
-    welch_psd,
-)
+from pris_cosim.signals.spectral import (DEFAULT_OVERLAP, FrequencyResponse, coherence, cross_psd, estimate_response,
+    log_resample, synthesise_two_clock, tfestimate, welch_psd)
 
 FS = 100e3  # Hz
 N = 2**16

@@ -8,16 +8,10 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from pris_cosim.measured import MeasuredResponses, read_response_csv, write_response_csv
-from pris_cosim.measured_core import MeasuredDataError
-from pris_cosim.spectral_uncertainty import (
-    clock_null_mask,
-    h1_log_sd,
-    local_linear,
-    log_band_edges,
-    pooled,
-    welch_averages,
-)
+from pris_cosim.measured.formats import MeasuredResponses, read_response_csv, write_response_csv
+from pris_cosim.measured.core import MeasuredDataError
+from pris_cosim.signals.uncertainty import (clock_null_mask, h1_log_sd, local_linear, log_band_edges, pooled,
+    welch_averages)
 
 
 def test_null_mask_is_the_band_around_each_clock_multiple():

@@ -12,7 +12,7 @@ from xml.etree import ElementTree
 import pytest
 from fmpy.model_description import read_model_description
 
-from pris_cosim import ssp
+from pris_cosim.fmi import ssp
 from pris_cosim.errors import CircuitError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,10 +11,10 @@ import pytest
 
 from estimation import approaches as ap
 from estimation import cli
-from estimation.executor import ResultsStore, Task
+from estimation.search.executor import ResultsStore, Task
 from estimation.studies import common
 from estimation.studies import two_section as two
-from pris_cosim.models import get_model
+from pris_cosim.models.builtin import get_model
 
 
 @pytest.mark.slow

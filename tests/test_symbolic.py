@@ -4,8 +4,8 @@ import pytest
 
 sp = pytest.importorskip("sympy")
 
-from pris_cosim.models import get_model  # noqa: E402
-from pris_cosim.symbolic import coefficients, transfer_functions  # noqa: E402
+from pris_cosim.models.builtin import get_model  # noqa: E402
+from pris_cosim.circuits.symbolic import coefficients, transfer_functions  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ from xml.etree import ElementTree
 
 import pytest
 
-from pris_cosim.models import get_model, model_names
-from pris_cosim.thesis_cases import CASES, HV_TERMINAL, LV_TERMINAL, THREE_SECTION, TWO_SECTION, case_for
+from pris_cosim.models.builtin import get_model, model_names
+from pris_cosim.fmi.thesis_cases import CASES, HV_TERMINAL, LV_TERMINAL, THREE_SECTION, TWO_SECTION, case_for
 
 ROOT = Path(__file__).parents[1]
 #: The thesis's source settings, transcribed by hand as data (not generated from the code under test).

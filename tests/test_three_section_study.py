@@ -10,14 +10,15 @@ import sys
 import numpy as np
 import pytest
 
-from estimation.optimisers import Budget
+from estimation.search.optimisers import Budget
 from estimation.studies import cells, modal
-from estimation.studies import three_section as three
-from estimation.studies import three_section_frequency as three_frequency
+from estimation.studies.three_section import cases
+from estimation.studies.three_section import study as three
+from estimation.studies.three_section import frequency as three_frequency
 
 
 def test_bridge_drive_reproduces_the_target_and_current_injection_does_not():
-    """The target comes from pris_cosim.timedomain; the estimate from the batched engine of the study."""
+    """The target comes from pris_cosim.lab.timedomain; the estimate from the batched engine of the study."""
     params = three.make_params()
     u = params.to_unit(three.TARGET)[None]
     v_rms = float(np.sqrt(np.mean(three.time_target()["v_in"] ** 2)))
@@ -85,7 +86,7 @@ def test_convergence_trace_is_the_running_best():
 def test_tiny_study_with_seeds_and_noise_writes_rows_and_figures(tmp_path, monkeypatch):
     def tiny(approach, optimiser, quick):
         glob = {"swarm_size": 8, "max_iter": 2} if optimiser == "pso" else {"restarts": 0, "popsize": 8, "max_iter": 2}
-        return {"method": f"{three.GLOBAL_METHODS[optimiser]}+local",
+        return {"method": f"{cases.GLOBAL_METHODS[optimiser]}+local",
                 "options": {"global_options": glob, "local_options": {"max_iter": 1}, "global_share": 0.9},
                 "budget": Budget(max_evals=60), "polish_iterations": 1, "polish_time_s": 10.0,
                 "modal": {"restarts": 1, "budget": Budget(max_evals=60), "own_local_evals": 20,
@@ -136,7 +137,7 @@ def test_matrix_pencil_recovers_damped_sinusoids():
 
 
 def test_modal_guide_is_zero_at_the_target_and_not_elsewhere():
-    """Modes read off the pris_cosim.timedomain target against the eigenvalues of the estimate's arrangement."""
+    """Modes read off the pris_cosim.lab.timedomain target against the eigenvalues of the estimate's arrangement."""
     params = three.make_params()
     guide = three.modal_guide(params)
     assert guide.f_t.size == 3
@@ -159,7 +160,7 @@ def test_response_peaks_locate_resonances_between_grid_points():
 
 def test_target_resonances_match_the_analytic_impedance_peaks():
     """Peaks of the simulated target's Welch Zin against peaks of the analytic Zin on a fine grid."""
-    from pris_cosim.models import get_model
+    from pris_cosim.models.builtin import get_model
 
     got = three_frequency.frequency_peaks()
     f = np.linspace(3e3, 1e6, 400_000)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pris_cosim import timedomain as td
-from pris_cosim.arrangement import BRIDGE, SourceSettings, pris_arrangement
-from pris_cosim.circuit import Circuit
+from pris_cosim.lab import timedomain as td
+from pris_cosim.circuits.arrangement import BRIDGE, SourceSettings, pris_arrangement
+from pris_cosim.circuits.circuit import Circuit
 from pris_cosim.errors import CircuitError, NonPassiveError
-from pris_cosim.mna import MNA
-from pris_cosim.models import get_model
-from pris_cosim.signals import hbridge_waveform, lfsr_prbs
+from pris_cosim.circuits.mna import MNA
+from pris_cosim.models.builtin import get_model
+from pris_cosim.signals.perturbation import hbridge_waveform, lfsr_prbs
 
 from conftest import needs_ngspice
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from pris_cosim.errors import ExpressionError
-from pris_cosim.expressions import Expression
+from pris_cosim.circuits.expressions import Expression
 from pris_cosim.units import format_value, parse_value
 
 

@@ -8,10 +8,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pris_cosim import virtual_lab as vl
-from pris_cosim.measured import read_response_csv
-from pris_cosim.models import get_model
-from pris_cosim.timedomain import simulate_pris
+from pris_cosim.lab import virtual_lab as vl
+from pris_cosim.measured.formats import read_response_csv
+from pris_cosim.models.builtin import get_model
+from pris_cosim.lab.timedomain import simulate_pris
 
 SIX = ["Zlvoc", "Zlvsc", "Zhvoc", "Zhvsc", "Rlvhv", "Rhvlv"]
 MAX_DB = 0.5  # round-trip magnitude tolerance, 10 Hz - 10 kHz

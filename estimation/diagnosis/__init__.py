@@ -10,7 +10,7 @@ from importlib import import_module
 from typing import Any
 
 _WHERE = {"Diagnosis": "result", "diagnose_frequency": "diagnose", "DiagnosisError": "fit", "FitResult": "fit",
-          "FrequencyFit": "fit", "WaveformDiagnosis": "waveform", "diagnose_waveforms": "waveform"}
+          "FrequencyFit": "fit", "WaveformDiagnosis": "waveform.source", "diagnose_waveforms": "waveform.source"}
 
 __all__ = sorted(_WHERE)
 

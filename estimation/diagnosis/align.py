@@ -22,8 +22,8 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import least_squares, linear_sum_assignment
 
-from .fit import FrequencyFit
-from .unmerge import resonance_frequencies
+from estimation.diagnosis.fit import FrequencyFit
+from estimation.diagnosis.causes.unmerge import resonance_frequencies
 
 #: Pull towards the start values: a value moved by ``tau`` (one tolerance, or ``ln 1.2`` without a prior) weighs
 #: as much as a resonance 1 % off.

@@ -7,11 +7,11 @@ from typing import Any
 
 import numpy as np
 
-from pris_cosim.models import Model, lumped_rlc
+from pris_cosim.models.builtin import Model, lumped_rlc
 
-from .align import aligned_start
-from .cores import SharedBatch, helper_available
-from .fit import DiagnosisError, FitResult, FrequencyFit
+from estimation.diagnosis.align import aligned_start
+from estimation.diagnosis.cores import SharedBatch, helper_available
+from estimation.diagnosis.fit import DiagnosisError, FitResult, FrequencyFit
 
 
 def lumped_from_data(f: np.ndarray, z: np.ndarray) -> list[Model]:

@@ -7,10 +7,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from pris_cosim.cli_sim import si_value
+from pris_cosim.cli.sim import si_value
 
-from .prior import DEFAULT_TOLERANCE
-from .report import parallel_note
+from estimation.diagnosis.prior import DEFAULT_TOLERANCE
+from estimation.diagnosis.report import parallel_note
 
 
 def register(subparsers: Any) -> None:
@@ -69,10 +69,10 @@ def _sections(text: str) -> int:
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
-    from pris_cosim.cli import _emit
-    from pris_cosim.measured import Waveforms, load_measured
+    from pris_cosim.cli.common import _emit
+    from pris_cosim.measured.formats import Waveforms, load_measured
 
-    from .fit import DiagnosisError
+    from estimation.diagnosis.fit import DiagnosisError
 
     if getattr(args, "reference", None) is not None:
         from estimation.sfra.cli import print_text, run_sfra
@@ -91,11 +91,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     data = load_measured(args.measured, segment=args.segment)
     if isinstance(data, Waveforms) and (args.model or args.netlist):
         # a PRIS record of a winding: its input impedance diagnosed against the winding's design
-        from pris_cosim.models import get_model
-        from pris_cosim.netlist import read_netlist
+        from pris_cosim.models.builtin import get_model
+        from pris_cosim.circuits.netlist import read_netlist
 
-        from .report import write_report
-        from .winding_waveform import diagnose_winding_waveforms
+        from estimation.diagnosis.report import write_report
+        from estimation.diagnosis.waveform.winding import diagnose_winding_waveforms
 
         model = get_model(args.model) if args.model else None
         circuit = read_netlist(args.netlist) if args.netlist else None
@@ -109,18 +109,18 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         if None in (args.rpris, args.lpris, args.cpris):
             raise DiagnosisError("waveform data needs the nominal source values --rpris --lpris --cpris (the source "
                                  "check on a resistive load), or --model / --netlist (a winding in the record)")
-        from .waveform import diagnose_waveforms
-        from .waveform_report import write_report as write_waveform_report
+        from estimation.diagnosis.waveform.source import diagnose_waveforms
+        from estimation.diagnosis.waveform.report import write_report as write_waveform_report
 
         diag = diagnose_waveforms(data, args.rpris, args.lpris, args.cpris, r_load=args.rload, progress=True)
         if args.report:
             write_waveform_report(diag, args.report)
     else:
-        from pris_cosim.netlist import read_netlist
-        from pris_cosim.models import get_model
+        from pris_cosim.circuits.netlist import read_netlist
+        from pris_cosim.models.builtin import get_model
 
-        from .diagnose import diagnose_frequency
-        from .report import write_report
+        from estimation.diagnosis.diagnose import diagnose_frequency
+        from estimation.diagnosis.report import write_report
 
         model = get_model(args.model) if args.model else None
         circuit = read_netlist(args.netlist) if args.netlist else None

@@ -9,14 +9,14 @@ from typing import Any
 
 import numpy as np
 
-from pris_cosim.circuit import Circuit
-from pris_cosim.models import Configuration
+from pris_cosim.circuits.circuit import Circuit
+from pris_cosim.models.builtin import Configuration
 
-from .catalogue import Effect
-from .drift import GROSS_DRIFT
-from .evidence import noise_variance, residuals_white
-from .fit import FitResult, FrequencyFit
-from .prior import DesignPrior
+from estimation.diagnosis.causes.catalogue import Effect
+from estimation.diagnosis.drift import GROSS_DRIFT
+from estimation.diagnosis.evidence import noise_variance, residuals_white
+from estimation.diagnosis.fit import FitResult, FrequencyFit
+from estimation.diagnosis.prior import DesignPrior
 
 MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
 #: Selection stops once the cost is within this factor of the noise floor.

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .fit import CANDIDATE_FAILURES, FitResult, current_nc
+from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, current_nc
 
 #: Evaluations of the refit, from its own values, of each model the selection names (one port).
 CONVERGE_NFEV = 300

@@ -52,7 +52,7 @@ class _Helper:
     """The helper process, its pipe, and the claim bounds ``[low, high)`` of the batch in hand (shared, locked)."""
 
     def __init__(self) -> None:
-        from ..executor import _start_forkserver_detached
+        from estimation.search.executor import _start_forkserver_detached
 
         ctx = multiprocessing.get_context("forkserver")
         self.lock = ctx.Lock()
@@ -141,7 +141,7 @@ def jobs_setting() -> int | None:
     if not text:
         return None
     if not text.isdigit() or int(text) < 1:
-        from .fit import DiagnosisError
+        from estimation.diagnosis.fit import DiagnosisError
 
         raise DiagnosisError(f"{JOBS_VARIABLE}={text!r}: expected a whole number of processes >= 1 (1: one core)")
     return int(text)
@@ -196,8 +196,8 @@ def _helper_loop(conn: Any, lock: Any, bounds: Any, parent: int) -> None:
     the two ends have met. An item that raises (or whose result does not
     pickle) is sent back as not done: this process then runs it itself.
     """
-    from .._threads import single_threaded_blas
-    from .._workers import watch_parent
+    from estimation.search._threads import single_threaded_blas
+    from estimation.search._workers import watch_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle
     watch_parent(parent)

@@ -66,29 +66,31 @@ from typing import Any
 
 import numpy as np
 
-from pris_cosim.circuit import Circuit
+from pris_cosim.circuits.circuit import Circuit
 from pris_cosim.errors import CircuitError
-from pris_cosim.frf import Response
-from pris_cosim.models import Configuration, Model, get_model
+from pris_cosim.frf.response import Response
+from pris_cosim.models.builtin import Configuration, Model, get_model
 
-from .baseline import fit_multistart, lumped_from_data
-from .cores import helper_available, shared_map
-from .catalogue import FREQUENCY_CAUSES, Effect
-from .evidence import band_table, localise, noise_floor, noise_weights, resonance_comparison, unexplained_bands
-from .fit import CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit, current_nc, significant
-from .drift import located_drift, relaxed_drift, with_parallel
-from .converge import converged
-from .holdout import held_out_gain
-from .prior import DEFAULT_TOLERANCE, design_prior
-from .forms import rechoose_forms
-from .realise import realise_extended
-from .report import parallel_note
-from .result import Diagnosis
-from .section_fits import fit_missing_section, section_pairs
-from .single import single_causes, start_tails
-from .unmerge import missing_modes, resolved_points
-from .context import (MAX_BASELINE_RMS, NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR, UNMERGE_ABOVE_FLOOR, Context,
-                      log)
+from estimation.diagnosis.baseline import fit_multistart, lumped_from_data
+from estimation.diagnosis.cores import helper_available, shared_map
+from estimation.diagnosis.causes.catalogue import FREQUENCY_CAUSES, Effect
+from estimation.diagnosis.evidence import (band_table, localise, noise_floor, noise_weights, resonance_comparison,
+    unexplained_bands)
+from estimation.diagnosis.fit import (CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit, current_nc,
+    significant)
+from estimation.diagnosis.drift import located_drift, relaxed_drift, with_parallel
+from estimation.diagnosis.converge import converged
+from estimation.diagnosis.holdout import held_out_gain
+from estimation.diagnosis.prior import DEFAULT_TOLERANCE, design_prior
+from estimation.diagnosis.causes.forms import rechoose_forms
+from estimation.diagnosis.causes.realise import realise_extended
+from estimation.diagnosis.report import parallel_note
+from estimation.diagnosis.result import Diagnosis
+from estimation.diagnosis.causes.section_fits import fit_missing_section, section_pairs
+from estimation.diagnosis.causes.single import single_causes, start_tails
+from estimation.diagnosis.causes.unmerge import missing_modes, resolved_points
+from estimation.diagnosis.context import (MAX_BASELINE_RMS, NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR,
+    UNMERGE_ABOVE_FLOOR, Context, log)
 
 def _refuse(pool: dict[str, Any], failed: list[dict[str, Any]], best: Any, cause: str, progress: bool,
             message: str, reason: str) -> None:

@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from pris_cosim.circuit import Circuit, node_name
+from pris_cosim.circuits.circuit import Circuit, node_name
 
-from .align import aligned_start, resonance_mismatch
-from .cores import shared_map
-from .fit import CANDIDATE_FAILURES, FitResult, current_nc
+from estimation.diagnosis.align import aligned_start, resonance_mismatch
+from estimation.diagnosis.cores import shared_map
+from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, current_nc
 
 #: A fit that reaches the noise floor but moves a value more than this many tolerances from the design
 #: (``|ln(v/d)| > GROSS_DRIFT ln(1 + tolerance)``) is not an explanation: causes are sought from the design values.

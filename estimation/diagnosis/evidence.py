@@ -6,7 +6,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..resonances import find_resonances
+from estimation.resonances import find_resonances
 
 REGIONS = ("low-frequency open-circuit", "low-frequency short-circuit", "resonance damping", "high frequency", "mid band")
 

@@ -38,14 +38,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from pris_cosim.circuit import Circuit
+from pris_cosim.circuits.circuit import Circuit
 from pris_cosim.errors import CircuitError
-from pris_cosim.expressions import Expression
-from pris_cosim.models import Configuration
+from pris_cosim.circuits.expressions import Expression
+from pris_cosim.models.builtin import Configuration
 
-from .catalogue import Effect, Groups, winding_groups
-from .network import ProbedConfiguration
-from .prior import DesignPrior
+from estimation.diagnosis.causes.catalogue import Effect, Groups, winding_groups
+from estimation.diagnosis.network import ProbedConfiguration
+from estimation.diagnosis.prior import DesignPrior
 
 
 #: Jacobian columns of the circuit values analytic (:meth:`FrequencyFit.circuit_jacobian`, about half the time of a
@@ -165,7 +165,7 @@ class FitResult:
 
 def coupling_names(circuit: Circuit) -> set[str]:
     """Lower-case names of K elements and of the parameters their values are built from."""
-    from pris_cosim.expressions import Expression
+    from pris_cosim.circuits.expressions import Expression
 
     names: set[str] = set()
     used_by_rlc: set[str] = set()

@@ -27,10 +27,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from pris_cosim.models import Configuration
+from pris_cosim.models.builtin import Configuration
 
-from .fit import FitResult, FrequencyFit
-from .prior import DesignPrior
+from estimation.diagnosis.fit import FitResult, FrequencyFit
+from estimation.diagnosis.prior import DesignPrior
 
 #: Largest error a held-out point counts for, in noise standard deviations (with the noise level given).
 HELD_OUT_CAP = 5.0

@@ -4,7 +4,7 @@ A frequency-dependent element (a skin-effect resistance, an inductance that
 falls with frequency, a core-loss resistance) would need a dense nodal solve
 at every frequency. Instead each such branch gets a voltage source ``V_j``
 in series (inserted at a terminal without capacitance, so the state-space
-reduction of :class:`pris_cosim.mna.MNA` still applies). The circuit with
+reduction of :class:`pris_cosim.circuits.mna.MNA` still applies). The circuit with
 constant values is put into pole-residue form once per parameter set, for
 the port current and every ``V_j`` as inputs and for the response nodes and
 every branch current ``i_j`` as outputs:
@@ -46,10 +46,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from pris_cosim.circuit import GROUND, Circuit
+from pris_cosim.circuits.circuit import GROUND, Circuit
 from pris_cosim.errors import CircuitError
-from pris_cosim.frf import Response
-from pris_cosim.mna import MNA
+from pris_cosim.frf.response import Response
+from pris_cosim.circuits.mna import MNA
 
 #: Eigenvector condition number above which the resolvent is solved directly instead.
 MAX_CONDITION = 1e10

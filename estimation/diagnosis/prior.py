@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pris_cosim.circuit import GROUND, Circuit
+from pris_cosim.circuits.circuit import GROUND, Circuit
 
 #: Default tolerance of the design values (relative): a documented, finite prior.
 DEFAULT_TOLERANCE = 0.2

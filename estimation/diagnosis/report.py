@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pris_cosim.netlist import write_netlist
+from pris_cosim.circuits.netlist import write_netlist
 from pris_cosim.plotting import pyplot
 
-from .result import Diagnosis
+from estimation.diagnosis.result import Diagnosis
 
 
 def plot_fits(diag: Diagnosis, path: Path) -> Path:

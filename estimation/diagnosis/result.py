@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from .fit import FitResult
+from estimation.diagnosis.fit import FitResult
 
 
 @dataclass

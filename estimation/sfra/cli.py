@@ -27,12 +27,12 @@ def run_sfra(args: argparse.Namespace) -> dict[str, Any]:
         One-line input problems (the command line turns them into exit status 2).
     """
     from estimation.diagnosis.fit import DiagnosisError
-    from pris_cosim.touchstone import ports_from_extension
+    from pris_cosim.measured.touchstone import ports_from_extension
 
-    from .faults import diagnose_sweep
-    from .fingerprint import load_or_fit
-    from .indices import comparison_indices
-    from .sweep import load_sweep
+    from estimation.sfra.faults import diagnose_sweep
+    from estimation.sfra.fingerprint import load_or_fit
+    from estimation.sfra.indices import comparison_indices
+    from estimation.sfra.sweep import load_sweep
 
     progress = not getattr(args, "quiet", False)
     for opt, path in (("--measured", args.measured), ("--reference", args.reference)):
@@ -54,12 +54,12 @@ def run_sfra(args: argparse.Namespace) -> dict[str, Any]:
     out["reference"] = str(args.reference)
     out["seconds"] = time.perf_counter() - t0
     if getattr(args, "report", None):
-        from .report import write_report
+        from estimation.sfra.report import write_report
 
         out["report"] = str(write_report(diag, out, args.report))
     if getattr(args, "model_out", None):
-        from pris_cosim.touchstone import write_touchstone
-        from .winding import admittance
+        from pris_cosim.measured.touchstone import write_touchstone
+        from estimation.sfra.winding import admittance
 
         f = ref.frequency_hz
         write_touchstone(args.model_out, f, admittance(diag.fault_model, f), "Y", "RI", "Hz", 50.0,

@@ -88,9 +88,9 @@ from threadpoolctl import threadpool_limits
 
 from estimation.diagnosis.fit import DiagnosisError, bic
 
-from .fingerprint import Fingerprint, model_y
-from .sweep import MODEL_FLOOR, Sweep
-from .winding import ShortedLoop, WindingModel
+from estimation.sfra.fingerprint import Fingerprint, model_y
+from estimation.sfra.sweep import MODEL_FLOOR, Sweep
+from estimation.sfra.winding import ShortedLoop, WindingModel
 
 __all__ = ["Candidate", "SfraDiagnosis", "diagnose_sweep", "drift_sigma", "CAUSES", "MIN_GAIN", "MIN_DELTA_BIC",
            "SHUNT_DRIFT"]

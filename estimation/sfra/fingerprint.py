@@ -57,8 +57,8 @@ from threadpoolctl import threadpool_limits
 
 from estimation.diagnosis.fit import DiagnosisError, bic
 
-from .sweep import MODEL_FLOOR, Sweep
-from .winding import WindingModel, admittance
+from estimation.sfra.sweep import MODEL_FLOOR, Sweep
+from estimation.sfra.winding import WindingModel, admittance
 
 __all__ = ["Fingerprint", "fit_fingerprint", "load_or_fit", "count_resonances", "model_y", "cache_dir",
            "CODE_VERSION"]

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .faults import SfraDiagnosis
-from .fingerprint import model_y
-from .indices import BANDS
+from estimation.sfra.faults import SfraDiagnosis
+from estimation.sfra.fingerprint import model_y
+from estimation.sfra.indices import BANDS
 
 __all__ = ["write_report"]
 

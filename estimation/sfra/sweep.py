@@ -107,8 +107,8 @@ def load_sweep(path: str | os.PathLike) -> Sweep:
     MeasuredDataError
         One line naming the file (and line) for a bad or non-two-port file.
     """
-    from pris_cosim.measured import MeasuredDataError
-    from pris_cosim.touchstone import read_touchstone
+    from pris_cosim.measured.formats import MeasuredDataError
+    from pris_cosim.measured.touchstone import read_touchstone
 
     ts = read_touchstone(path, nports=2)
     with np.errstate(all="ignore"):

@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from ..parameters import ParameterSet
-from ..verdict import fisher_information
+from estimation.parameters import ParameterSet
+from estimation.verdict import fisher_information
 
 #: Success: every parameter within max(FLOOR_PERCENT, FACTOR x its bound).
 FLOOR_PERCENT = 5.0

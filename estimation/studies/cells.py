@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from ..verdict import fisher_information  # noqa: F401  (the studies' Fisher information)
+from estimation.verdict import fisher_information  # noqa: F401  (the studies' Fisher information)
 
 #: A run succeeds when every parameter is within this many percent of the target.
 SUCCESS_PERCENT = 5.0

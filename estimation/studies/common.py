@@ -1,6 +1,6 @@
 """Shared machinery of the thesis's estimation studies: one run, its row, identifiability, the study driver.
 
-A study is a list of :class:`estimation.executor.Task` objects, one per run
+A study is a list of :class:`estimation.search.executor.Task` objects, one per run
 (case, approach, optimiser, cost function). Each task calls a top-level
 ``run_*`` function of the study module that builds the target and the
 approach, runs the optimiser and returns one **row** (a JSON-ready dict):
@@ -10,7 +10,7 @@ approach, runs the optimiser and returns one **row** (a JSON-ready dict):
 ``estimate`` {parameter: value}, ``non_identifiable`` [names], ``cost``,
 ``wall_s``, ``nfev``, ``per_eval_s``, ``message`` and study-specific extras.
 
-:func:`run_study` sends the tasks through :func:`estimation.executor.run_tasks`
+:func:`run_study` sends the tasks through :func:`estimation.search.executor.run_tasks`
 (local processes, serial, or a Dask scheduler address), storing each run in
 ``<out>/runs/<id>.json`` and ``<out>/results.csv`` as it finishes; a rerun
 skips stored runs (resume), and writes ``<out>/study.json``.
@@ -28,10 +28,10 @@ from typing import Any
 
 import numpy as np
 
-from ..executor import ResultsStore, Task, atomic_write_text, run_tasks, to_jsonable
-from ..local_search import PolishResult, Recorder, least_squares_polish, optimise
-from ..optimisers import Budget, OptimResult, minimize
-from ..parameters import ParameterSet, identifiability
+from estimation.search.executor import ResultsStore, Task, atomic_write_text, run_tasks, to_jsonable
+from estimation.search.local_search import PolishResult, Recorder, least_squares_polish, optimise
+from estimation.search.optimisers import Budget, OptimResult, minimize
+from estimation.parameters import ParameterSet, identifiability
 
 
 __all__ = ["PolishResult", "Recorder", "least_squares_polish", "optimise"]  # re-exported from local_search

@@ -2,14 +2,14 @@
 
 Data. The six responses ``Zlvoc, Zlvsc, Zhvoc, Zhvsc, Rlvhv, Rhvlv`` of
 thesis (5.4), by default measured in the virtual laboratory
-(:mod:`pris_cosim.virtual_lab`) on the built-in ``hv-6section-freqdep``
+(:mod:`pris_cosim.lab.virtual_lab`) on the built-in ``hv-6section-freqdep``
 transformer: the passive six-section model with skin effect, core loss and a
 frequency-dependent core inductance (thesis (2.4)-(2.6)) realised as
 ladders, perturbed through the thesis's LV and HV PRIS sources, filtered,
 sampled at 1 MS/s with 16 bits and noise, two clocks combined. A measured
 CSV file (interfaces format) can be given instead.
 
-Models (all analytic, from one circuit description, :func:`pris_cosim.models.two_winding`):
+Models (all analytic, from one circuit description, :func:`pris_cosim.models.builtin.two_winding`):
 
 ===== ============================================== ===========
 case  model                                          parameters
@@ -60,15 +60,15 @@ from typing import Any
 
 import numpy as np
 
-from pris_cosim.frf_groups import GroupedResponseSet, NodalSolution
-from pris_cosim.measured import MeasuredResponses
-from pris_cosim.models import TABLES, Model, two_winding
+from pris_cosim.models.groups import GroupedResponseSet, NodalSolution
+from pris_cosim.measured.formats import MeasuredResponses
+from pris_cosim.models.builtin import TABLES, Model, two_winding
 
-from .. import costs as _costs
-from ..executor import Task
-from ..optimisers import minimize
-from ..parameters import ParameterSet
-from . import common
+from estimation import costs as _costs
+from estimation.search.executor import Task
+from estimation.search.optimisers import minimize
+from estimation.parameters import ParameterSet
+from estimation.studies import common
 
 NAME = "hv-transformer"
 RESPONSES: tuple[str, ...] = ("Zlvoc", "Zlvsc", "Zhvoc", "Zhvsc", "Rlvhv", "Rhvlv")
@@ -279,7 +279,7 @@ class SixResponseFit:
         """``(6 F, n)`` (``(12 F, n)`` with ``phase``) Jacobian of :meth:`residuals` at one unit-cube point.
 
         The response derivatives come from the adjoint of the nodal system
-        (:meth:`pris_cosim.frf_groups.GroupedResponseSet.sensitivities`): one complex solve per
+        (:meth:`pris_cosim.models.groups.GroupedResponseSet.sensitivities`): one complex solve per
         frequency and test circuit serves every parameter. Only the cheap map from the unit cube
         to element values (log scales, the tied coupling, the passivity repair) is differenced,
         by central steps ``+-step`` (one-sided at a bound). ``solution``: the nodal solve at ``u``
@@ -455,7 +455,7 @@ def run_lambda(case: str, weight: float, data: str, seeds: Sequence[int], swarm:
 
 def comparison_data(path: str, points_per_decade: int = 50) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """The measured six responses on a log grid over 10 Hz - 10 kHz (log-interpolated when needed)."""
-    from pris_cosim.measured import read_response_csv
+    from pris_cosim.measured.formats import read_response_csv
 
     data = read_response_csv(path)
     return resample(data, points_per_decade)
@@ -494,7 +494,7 @@ def matched_resonances(f: np.ndarray, measured: np.ndarray, estimated: np.ndarra
     A measured resonance is matched when the estimate has one of the same kind
     within ``tol_decades`` (0.05 decade = 12 %) of its frequency.
     """
-    from ..resonances import find_resonances
+    from estimation.resonances import find_resonances
 
     rm = find_resonances(f, measured)
     re = find_resonances(f, estimated)
@@ -568,7 +568,7 @@ def diagnose_case(row: Mapping[str, Any], data: str, points_per_decade: int, pro
     Returns the named ``cause``, its ``gain`` (fraction of the baseline cost removed by the
     extended model), the candidates' gains and the wall time.
     """
-    from ..diagnosis import diagnose_frequency
+    from estimation.diagnosis import diagnose_frequency
 
     spec = case_spec(row["case"])
     f, target = comparison_data(data, points_per_decade)
@@ -665,9 +665,9 @@ def plot_comparison(rows: Sequence[Mapping[str, Any]], out_dir: str | Path) -> P
 # ====================================================================== the study
 def lab_data(out: Path, quick: bool, seed: int, progress: bool) -> tuple[Path, dict[str, Any]]:
     """Virtual-lab measurements of the default truth, written once to ``out/measured.csv`` (reused on resume)."""
-    from pris_cosim import virtual_lab as vl
-    from pris_cosim.measured import read_response_csv
-    from pris_cosim.models import get_model
+    from pris_cosim.lab import virtual_lab as vl
+    from pris_cosim.measured.formats import read_response_csv
+    from pris_cosim.models.builtin import get_model
 
     path = out / "measured.csv"
     info: dict[str, Any] = {"truth": TRUTH, "lab": "quick" if quick else "full", "seed": seed}
@@ -721,7 +721,7 @@ def run(quick: bool = False, out: str | Path = "study-hv-transformer", scheduler
     out : path
         Results directory: ``measured.csv``, ``runs/``, ``results.csv``, ``study.json``, figures.
     scheduler, workers
-        See :func:`estimation.executor.run_tasks`.
+        See :func:`estimation.search.executor.run_tasks`.
     seed : int
         Noise seed of the virtual lab.
     measured : str, optional
@@ -787,9 +787,9 @@ def model_order(data: str, fmax: float = 20e3) -> dict[str, Any]:
     """Parallel resonances counted on the measured impedances up to ``fmax`` (above 20 kHz the
     thesis's data are noisy) and the number of HV sections they suggest (thesis 5.1.3: at least
     the number of parallel resonances of Zhvsc, even)."""
-    from pris_cosim.measured import read_response_csv
+    from pris_cosim.measured.formats import read_response_csv
 
-    from ..resonances import suggest_sections
+    from estimation.resonances import suggest_sections
 
     raw = read_response_csv(data)
     sel = raw.frequency_hz <= fmax

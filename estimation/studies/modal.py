@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from .. import approaches as ap
-from ..parameters import ParameterSet
+from estimation import approaches as ap
+from estimation.parameters import ParameterSet
 
 
 def free_segment(v_bprbs: np.ndarray, skip: int = 5) -> tuple[int, int]:

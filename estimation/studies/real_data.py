@@ -25,8 +25,8 @@ from typing import Any
 
 from pris_cosim.datafiles import REAL
 
-from .. import real_fits as rf
-from . import common
+from estimation import real_fits as rf
+from estimation.studies import common
 
 NAME = "real-data"
 ENV_VAR = "PRIS_COSIM_REAL_DATA"
@@ -106,7 +106,7 @@ def run(quick: bool, out: str | None, scheduler: str | None = None, workers: int
     ------
     ValueError
         The data directory lacks the files (one line naming it), or a file is
-        malformed (:class:`pris_cosim.measured.MeasuredDataError`).
+        malformed (:class:`pris_cosim.measured.formats.MeasuredDataError`).
     """
     t0 = time.perf_counter()
     say = common.say if progress else (lambda text: None)

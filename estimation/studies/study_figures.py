@@ -100,7 +100,7 @@ def slice_figure(space: Mapping[str, Any], path: str | Path) -> Path:
 
 def write_all(rows: Sequence[Mapping[str, Any]], spaces: Sequence[Mapping[str, Any]], out: Path) -> list[str]:
     """All figures of a study run into ``out``; returns their paths."""
-    from ..plotting import search_space_figure
+    from estimation.plotting import search_space_figure
 
     out.mkdir(parents=True, exist_ok=True)
     paths = []

@@ -12,7 +12,7 @@ Cost (4.20)-(4.21): summed squared log-magnitude errors of the responses of
 Table 4.3 (A: Zin; B: Zin, R2in; C: Zin, R2in, R1in).
 
 Optimisation (the thesis used MATLAB ``globalsearch``). Measured here, the
-multistart (:func:`estimation.optimisers.multistart`, the GlobalSearch
+multistart (:func:`estimation.search.optimisers.multistart`, the GlobalSearch
 role) gets trapped in local minima of this rugged cost (resonances that
 line up wrongly): on case 5 it stopped at a cost of 0.53 (target 2e-7) with
 80 local runs, and on case 2 (simulated) at 16 with the quick budget. The
@@ -89,15 +89,15 @@ from typing import Any
 
 import numpy as np
 
-from pris_cosim import timedomain as td
-from pris_cosim.arrangement import SourceSettings
-from pris_cosim.models import get_model
+from pris_cosim.lab import timedomain as td
+from pris_cosim.circuits.arrangement import SourceSettings
+from pris_cosim.models.builtin import get_model
 
-from .. import approaches as ap
-from ..executor import Task
-from ..optimisers import Budget
-from ..parameters import Parameter, ParameterSet
-from . import common
+from estimation import approaches as ap
+from estimation.search.executor import Task
+from estimation.search.optimisers import Budget
+from estimation.parameters import Parameter, ParameterSet
+from estimation.studies import common
 
 NAME = "two-section"
 PORT = "in"

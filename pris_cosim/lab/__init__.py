@@ -1,0 +1,1 @@
+"""Waveforms: the exact time-domain engine, the virtual laboratory of chapter 5 and the thesis figure reproductions."""

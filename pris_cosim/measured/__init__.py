@@ -1,0 +1,1 @@
+"""Measured data in and out: the interface CSV, instrument formats, Touchstone, MATLAB, waveform records."""

@@ -1,0 +1,1 @@
+"""The thesis's built-in models, their test configurations and the grouped responses of those configurations."""
