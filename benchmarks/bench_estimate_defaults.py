@@ -4,7 +4,7 @@ Each target draws every parameter of the default estimation vector
 log-uniformly within a factor ``--spread`` of its nominal value and inside
 the default bounds (couplings uniformly within +-2 %). Its responses (every configuration of the model, on the default
 band, 200 log-spaced points) come from the admittance-matrix solver in
-``tests/test_estimate_defaults.py``, which shares nothing with the
+``tests/estimate/test_defaults.py``, which shares nothing with the
 estimation's state-space and pole-residue paths. The estimate then runs with
 the defaults of ``estimate`` (no budget, optimiser or bounds given).
 
@@ -31,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from test_estimate_defaults import draw_target, target_responses, write_responses  # noqa: E402
+from estimate.test_defaults import draw_target, target_responses, write_responses  # noqa: E402
 
 from estimation import cli  # noqa: E402
 from estimation.estimate import default_band  # noqa: E402

@@ -4,7 +4,7 @@ Prints, per reader and command, how many inputs were accepted (``ok``), refused
 with one line (``rejected``) and how many broke the contract (tracebacks,
 several lines, leaked warnings, NaN in JSON, hangs), with one example of each
 failure. The CI tests run the same generators with a fixed seed and a few
-dozen inputs each (tests/test_fuzz.py).
+dozen inputs each (tests/cli/test_fuzz.py).
 
 Usage::
 
@@ -24,7 +24,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-import test_fuzz_cases as fc  # noqa: E402
+from cli import test_fuzz_cases as fc  # noqa: E402
 import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 

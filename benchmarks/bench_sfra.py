@@ -25,9 +25,9 @@ from scipy.stats import spearmanr
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from estimation.sfra.faults import diagnose_sweep  # noqa: E402
-from estimation.sfra.fingerprint import load_or_fit  # noqa: E402
-from estimation.sfra.sweep import load_sweep  # noqa: E402
+from estimation.diagnosis.sfra.faults import diagnose_sweep  # noqa: E402
+from estimation.diagnosis.sfra.fingerprint import load_or_fit  # noqa: E402
+from estimation.diagnosis.sfra.sweep import load_sweep  # noqa: E402
 import results_io  # noqa: E402  (benchmarks/: results as JSON)
 
 DEFAULT = ROOT / "pris_cosim" / "data" / "real" / "ipn_winding_interturn"

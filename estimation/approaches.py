@@ -51,12 +51,7 @@ from scipy import signal as _signal
 from estimation import costs as _costs
 from estimation.holds import batched_expm
 from estimation.parameters import ParameterSet
-from pris_cosim.circuits.arrangement import (
-    BRIDGE,
-    SENSE_INDUCTOR,
-    SourceSettings,
-    pris_arrangement,
-)
+from pris_cosim.circuits.arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangement
 from pris_cosim.circuits.circuit import GROUND, Circuit
 from pris_cosim.circuits.mna import MNA
 from pris_cosim.signals.perturbation import lfsr_prbs

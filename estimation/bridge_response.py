@@ -136,12 +136,12 @@ def record_model(u: np.ndarray, y: np.ndarray, order: int, block_rows: int = 100
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
     """The record's own sampled map from ``u`` to ``y``: a subspace model ``(A, b, c, d)`` of ``order`` states.
 
-    A PO-MOESP model (:func:`estimation.studies.modal.subspace_model`) of the
+    A PO-MOESP model (:func:`estimation.modal.subspace_model`) of the
     first ``max_samples`` samples; for a held bridge voltage the sampled map
     is exact, and the model is consistent under white output noise. None when
     the record is too short for ``order`` states.
     """
-    from estimation.studies import modal
+    from estimation import modal
 
     u = np.asarray(u, float)[:max_samples]
     y = np.asarray(y, float)[:max_samples]

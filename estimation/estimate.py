@@ -49,7 +49,7 @@ import numpy as np
 from estimation import approaches as ap
 from estimation.search.optimisers import Budget, minimize
 from estimation.parameters import ParameterSet
-from estimation.search.recipe import End, Outcome, Start, run_recipe
+from estimation.recipe import End, Outcome, Start, run_recipe
 
 #: Ties assumed when a config names neither parameters nor ties: the thesis's estimation vectors
 #: (two-section 4.1.3: R2 = R1, C2 = C1) and, for the 4-section cascade, the uniform winding of the
@@ -134,7 +134,7 @@ def default_plan(n: int, per_eval_s: float | None = None) -> dict[str, Any]:
 
 
 class ApproachKind:
-    """A built-in model or netlist scored by an approach: the stages of :func:`estimation.search.recipe.run_recipe`.
+    """A built-in model or netlist scored by an approach: the stages of :func:`estimation.recipe.run_recipe`.
 
     - start ``k``: the plan's global search (``plan["method"]``, seed ``seed + k``) on the stand-in
       ``proxy`` (or the approach), then, when the stand-in asks for them, the Levenberg-Marquardt
@@ -227,7 +227,7 @@ def run_plan(approach: ap.Approach, params: ParameterSet, data: np.ndarray, seed
     """Run the recipe on ``approach`` (stage 1 on ``proxy`` when given) and judge the answer.
 
     The stages are :class:`ApproachKind`'s, in the order and with the restart rule of
-    :func:`estimation.search.recipe.run_recipe`.
+    :func:`estimation.recipe.run_recipe`.
 
     Parameters
     ----------
@@ -295,7 +295,7 @@ def resonance_proxy(approach: ap.Approach, params: ParameterSet, circuit: Any, c
     parabola in log frequency) are the poles of the input impedance: the
     eigenvalues of the configuration's state matrix with a current drive at its
     port. The stand-in adds, per target peak, ``PEAK_WEIGHT * ln(f_peak / f_mode)``
-    to the nearest mode of the estimate (:class:`estimation.studies.modal.ResonanceProxy`).
+    to the nearest mode of the estimate (:class:`estimation.modal.ResonanceProxy`).
 
     Returns None when the approach compares no input impedance or the target has no such peak.
     """
@@ -303,7 +303,7 @@ def resonance_proxy(approach: ap.Approach, params: ParameterSet, circuit: Any, c
 
     from pris_cosim.circuits.mna import MNA
 
-    from estimation.studies import modal
+    from estimation import modal
 
     target = getattr(approach, "target", None)
     f = getattr(approach, "f", None)

@@ -23,53 +23,13 @@ The names below are this package's public namespace.
 
 from __future__ import annotations
 
-from estimation.costs.emd import (
-    EMD_METHODS,
-    Decomposer,
-    emd_correlation,
-    emd_nrmse,
-    iemd_correlation,
-    iemd_nrmse,
-    imf_ranges,
-    inferred_imfs,
-    pad_sets,
-    truncate_sets,
-)
-from estimation.costs.frequency import (
-    ESTIMATION_BAND,
-    LVSC_OMIT_BELOW,
-    TABLE_5_1_BANDS,
-    band_weights,
-    log_magnitude_error,
-    log_magnitude_sse,
-    omit_below,
-    response_range,
-    thesis_masks,
-    wnrmse,
-    z_correlation,
-    z_rmse,
-)
-from estimation.costs.metrics import (
-    correlation_cost,
-    mae,
-    mape,
-    mse,
-    nrmse_mean,
-    nrmse_range,
-    pearson,
-    rmse,
-    v_correlation,
-    v_rmse,
-)
-from estimation.costs.objects import (
-    CorrelationCost,
-    CostFunction,
-    EMDCost,
-    IEMDCost,
-    LogMagnitudeCost,
-    TimeCost,
-    WNRMSECost,
-    penalise,
-)
+from estimation.costs.emd import (EMD_METHODS, Decomposer, emd_correlation, emd_nrmse, iemd_correlation, iemd_nrmse,
+    imf_ranges, inferred_imfs, pad_sets, truncate_sets)
+from estimation.costs.frequency import (ESTIMATION_BAND, LVSC_OMIT_BELOW, TABLE_5_1_BANDS, band_weights,
+    log_magnitude_error, log_magnitude_sse, omit_below, response_range, thesis_masks, wnrmse, z_correlation, z_rmse)
+from estimation.costs.metrics import (correlation_cost, mae, mape, mse, nrmse_mean, nrmse_range, pearson, rmse,
+    v_correlation, v_rmse)
+from estimation.costs.objects import (CorrelationCost, CostFunction, EMDCost, IEMDCost, LogMagnitudeCost, TimeCost,
+    WNRMSECost, penalise)
 
 __all__ = ["TABLE_5_1_BANDS", "ESTIMATION_BAND", "LVSC_OMIT_BELOW", "EMD_METHODS", "mse", "mae", "rmse", "mape", "nrmse_mean", "nrmse_range", "pearson", "correlation_cost", "log_magnitude_error", "log_magnitude_sse", "z_rmse", "z_correlation", "band_weights", "omit_below", "thesis_masks", "response_range", "wnrmse", "v_rmse", "v_correlation", "Decomposer", "pad_sets", "truncate_sets", "imf_ranges", "emd_nrmse", "emd_correlation", "inferred_imfs", "iemd_nrmse", "iemd_correlation", "CostFunction", "LogMagnitudeCost", "CorrelationCost", "WNRMSECost", "TimeCost", "EMDCost", "IEMDCost", "penalise"]

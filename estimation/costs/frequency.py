@@ -13,12 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from estimation.costs.metrics import (
-    ArrayLike,
-    Responses,
-    _finite_or_inf,
-    correlation_cost,
-)
+from estimation.costs.metrics import ArrayLike, Responses, _finite_or_inf, correlation_cost
 
 #: Weighting bands of thesis Table 5.1, Hz, by response name (order of (5.4)).
 TABLE_5_1_BANDS: dict[str, tuple[float, float]] = {

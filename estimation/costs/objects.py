@@ -8,29 +8,10 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from estimation.costs.emd import (
-    Decomposer,
-    emd_correlation,
-    emd_nrmse,
-    iemd_correlation,
-    iemd_nrmse,
-)
-from estimation.costs.frequency import (
-    TABLE_5_1_BANDS,
-    _select,
-    log_magnitude_sse,
-    thesis_masks,
-    wnrmse,
-    z_correlation,
-    z_rmse,
-)
-from estimation.costs.metrics import (
-    ArrayLike,
-    Responses,
-    _finite_or_inf,
-    v_correlation,
-    v_rmse,
-)
+from estimation.costs.emd import Decomposer, emd_correlation, emd_nrmse, iemd_correlation, iemd_nrmse
+from estimation.costs.frequency import (TABLE_5_1_BANDS, _select, log_magnitude_sse, thesis_masks, wnrmse,
+    z_correlation, z_rmse)
+from estimation.costs.metrics import ArrayLike, Responses, _finite_or_inf, v_correlation, v_rmse
 
 
 # ====================================================================== cost objects

@@ -75,7 +75,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from estimation.diagnosis.fit import DiagnosisError
 
     if getattr(args, "reference", None) is not None:
-        from estimation.sfra.cli import print_text, run_sfra
+        from estimation.diagnosis.sfra.cli import print_text, run_sfra
 
         out = run_sfra(args)
         if args.json:

@@ -27,7 +27,7 @@ distinct levels (a PRBS, a DAC staircase) changes only at sample instants and
 is held over each sample (zero-order hold); any other input varies linearly
 between samples. The answer reports the hold and the reason.
 
-Recipe: the staged recipe of :func:`estimation.search.recipe.run_recipe`, the one every
+Recipe: the staged recipe of :func:`estimation.recipe.run_recipe`, the one every
 model kind runs (built-in models and netlists through
 :class:`estimation.estimate.ApproachKind`); the FMU's stages
 (:class:`FmuKind`) are made for few evaluations, each a whole FMU run or a
@@ -89,7 +89,7 @@ from estimation.fmu.model import FmuSetupError, fmu_variables
 from estimation.fmu.problem import APPROACHES, problem, read_record
 from estimation.holds import HOLDS, decide_hold
 from estimation.search.local_search import staged_least_squares
-from estimation.search.recipe import End, Start
+from estimation.recipe import End, Start
 
 __all__ = ["FmuKind", "design_task", "make_setup", "restart_task", "run_fmu_estimate"]
 
@@ -315,7 +315,7 @@ def _out_dir(cfg: Mapping[str, Any], setup: Mapping[str, Any]) -> Path:
 
 
 class FmuKind:
-    """An FMU in the loop: the stages of :func:`estimation.search.recipe.run_recipe` (module docstring, Recipe).
+    """An FMU in the loop: the stages of :func:`estimation.recipe.run_recipe` (module docstring, Recipe).
 
     - start ``k``: at the first call, the design (ranked on the record's responses) and the screen
       of the best design points on short windows, each chunk and candidate a task of
@@ -468,7 +468,7 @@ def run_fmu_estimate(cfg: Mapping[str, Any], out: str | os.PathLike[str] | None 
         ``wall_s``, the verdict (``converged``, ``uncertainty``, ``non_identifiable`` ...),
         ``restarts``, ``errors_percent`` when the target gives true ``values``.
     """
-    from estimation.search.recipe import run_recipe
+    from estimation.recipe import run_recipe
 
     t0 = time.perf_counter()
     setup = make_setup(cfg, base)

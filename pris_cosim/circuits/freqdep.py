@@ -338,7 +338,7 @@ def _scaled(ladder: FosterRL, k: float) -> FosterRL:
 
 #: Unit ladders of the default :class:`TransformerEffects`, as :func:`fit_unit_ladders` computes them
 #: (kept with the package so that building the built-in models needs no optimiser at start-up;
-#: ``tests/test_freqdep.py`` checks the file against a fresh fit).
+#: ``tests/circuits/test_freqdep.py`` checks the file against a fresh fit).
 UNIT_LADDERS_FILE = DATA / "unit_ladders.json"
 
 

@@ -22,24 +22,11 @@ import numpy as np
 
 from pris_cosim import __version__
 from pris_cosim.circuits.circuit import Circuit
-from pris_cosim.cli.common import (
-    Interrupted,
-    OneLineParser,
-    UsageError,
-    _complex_json,
-    _emit,
-    add_circuit_options,
-    load_circuit,
-)
+from pris_cosim.cli.common import (Interrupted, OneLineParser, UsageError, _complex_json, _emit, add_circuit_options,
+    load_circuit)
 from pris_cosim.errors import CircuitError, NonPassiveWarning
 from pris_cosim.frf.response import Response, logspace_hz
-from pris_cosim.models.builtin import (
-    Configuration,
-    Model,
-    ResponseSet,
-    get_model,
-    model_names,
-)
+from pris_cosim.models.builtin import Configuration, Model, ResponseSet, get_model, model_names
 
 
 def _frf_parser(sub: Any) -> None:

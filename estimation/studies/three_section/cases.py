@@ -17,7 +17,8 @@ from estimation import approaches as ap
 from estimation import costs
 from estimation.parameters import ParameterSet
 from estimation.search.optimisers import Budget, minimize
-from estimation.studies import cells, common, modal
+from estimation.studies import cells, common
+from estimation import modal
 from pris_cosim.circuits.arrangement import SourceSettings
 from pris_cosim.lab import timedomain as td
 from pris_cosim.lab import virtual_lab as vl

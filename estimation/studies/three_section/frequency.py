@@ -20,33 +20,12 @@ import numpy as np
 
 from estimation import approaches as ap
 from estimation.parameters import ParameterSet
-from estimation.studies import cells, common, modal
-from estimation.studies.three_section.cases import (
-    BIN_NOISE_FLOOR,
-    F_MIN,
-    FS_FRF,
-    ML_WEIGHT_DRAWS,
-    ML_WEIGHT_FLOOR,
-    NAME,
-    NAMES,
-    PEAK_COUNT,
-    PEAK_NOISE_FACTOR,
-    PEAK_PROMINENCE,
-    PEAK_WEIGHT,
-    PORT,
-    SOURCE_FRF,
-    SUBSPACE_ORDER,
-    SUBSPACE_ROWS,
-    SUBSPACE_SAMPLES_FRF,
-    TARGET,
-    Level,
-    _frequency_record,
-    _log_zin,
-    _strongest_modes,
-    case_key,
-    frequency_fmax,
-    frequency_fs,
-)
+from estimation.studies import cells, common
+from estimation import modal
+from estimation.studies.three_section.cases import (BIN_NOISE_FLOOR, F_MIN, FS_FRF, ML_WEIGHT_DRAWS, ML_WEIGHT_FLOOR,
+    NAME, NAMES, PEAK_COUNT, PEAK_NOISE_FACTOR, PEAK_PROMINENCE, PEAK_WEIGHT, PORT, SOURCE_FRF, SUBSPACE_ORDER,
+    SUBSPACE_ROWS, SUBSPACE_SAMPLES_FRF, TARGET, Level, _frequency_record, _log_zin, _strongest_modes, case_key,
+    frequency_fmax, frequency_fs)
 from pris_cosim.models.builtin import get_model
 
 

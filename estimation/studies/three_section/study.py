@@ -45,7 +45,7 @@ each mode frequency, inside a wide valley of costs near 0.46 V RMS where
 the ringing is not matched. Measured with the quick budgets (tens of
 thousands of evaluations) GA, PSO and CMA-ES on the time cost alone all end
 in that valley. With the bridge drive the time, EMD and IEMD paths therefore
-start with a modal stage (:mod:`estimation.studies.modal`): the chosen
+start with a modal stage (:mod:`estimation.modal`): the chosen
 optimiser matches the arrangement's modes (frequencies, and with small
 weights damping ratios and residues) to those of a subspace model of the
 whole record from the commanded bridge voltage to the terminal voltage
@@ -100,48 +100,13 @@ import numpy as np
 from estimation import approaches as ap
 from estimation.parameters import ParameterSet
 from estimation.search.executor import Task
-from estimation.studies import cells, common, modal
-from estimation.studies.three_section.cases import (
-    ADC,
-    APPROACHES,
-    FISHER_SNR_DB,
-    FS_FRF,
-    METRICS,
-    MODAL_DAMPING_WEIGHT,
-    MODAL_MIN_MODES,
-    MODAL_RESIDUE_WEIGHT,
-    MODE_CONSTRAINT_WEIGHT,
-    N_POINTS,
-    NAME,
-    NAMES,
-    OPTIMISERS,
-    PORT,
-    SHOWN,
-    SLICE,
-    SOURCE_FRF,
-    SOURCE_TIME,
-    SUBSPACE_ORDER,
-    SUBSPACE_ROWS,
-    TARGET,
-    THESIS,
-    TIME_AVERAGES,
-    Level,
-    _chain_record,
-    _log_zin,
-    _own_cost_stage,
-    _record_fs,
-    _strongest_modes,
-    build_approach,
-    case_key,
-    chain_sigma,
-    is_adc,
-    level_of,
-    level_tag,
-    make_params,
-    optimiser_settings,
-    time_fs,
-    time_target,
-)
+from estimation.studies import cells, common
+from estimation import modal
+from estimation.studies.three_section.cases import (ADC, APPROACHES, FISHER_SNR_DB, FS_FRF, METRICS,
+    MODAL_DAMPING_WEIGHT, MODAL_MIN_MODES, MODAL_RESIDUE_WEIGHT, MODE_CONSTRAINT_WEIGHT, N_POINTS, NAME, NAMES,
+    OPTIMISERS, PORT, SHOWN, SLICE, SOURCE_FRF, SOURCE_TIME, SUBSPACE_ORDER, SUBSPACE_ROWS, TARGET, THESIS,
+    TIME_AVERAGES, Level, _chain_record, _log_zin, _own_cost_stage, _record_fs, _strongest_modes, build_approach,
+    case_key, chain_sigma, is_adc, level_of, level_tag, make_params, optimiser_settings, time_fs, time_target)
 from pris_cosim.lab import timedomain as td
 from pris_cosim.models.builtin import get_model
 

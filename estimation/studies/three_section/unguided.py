@@ -19,18 +19,8 @@ from estimation import approaches as ap
 from estimation.parameters import ParameterSet
 from estimation.search import local_search
 from estimation.studies import cells, common
-from estimation.studies.three_section.cases import (
-    MODAL_MIN_MODES,
-    NAME,
-    NAMES,
-    PROFILED,
-    TARGET,
-    Level,
-    _own_cost_stage,
-    build_approach,
-    case_key,
-    optimiser_settings,
-)
+from estimation.studies.three_section.cases import (MODAL_MIN_MODES, NAME, NAMES, PROFILED, TARGET, Level,
+    _own_cost_stage, build_approach, case_key, optimiser_settings)
 
 
 def run_unguided(a: ap.Approach, params: ParameterSet, approach: str, optimiser: str, metric: str, quick: bool,

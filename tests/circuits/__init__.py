@@ -1,0 +1,1 @@
+"""Circuit descriptions, netlists, units and expressions, frequency-dependent ladders, symbolic forms."""

@@ -1,0 +1,1 @@
+"""The command line, its fuzzing, the README's commands, figures and the package layout."""

@@ -1,0 +1,1 @@
+"""Diagnosis on frequency data: causes, drift, selection, on independently generated cases."""

@@ -1,0 +1,1 @@
+"""Costs, optimisers, executor, approaches, parameters, verdicts and estimation with netlists and FMUs."""

@@ -1,0 +1,1 @@
+"""FMUs, Modelica, SSP archives and co-simulation, run in independent importers."""

@@ -1,0 +1,1 @@
+"""Analytic frequency responses against ngspice AC and a separate nodal solver."""

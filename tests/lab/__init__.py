@@ -1,0 +1,1 @@
+"""The time-domain engine, the virtual laboratory and the thesis reproductions."""

@@ -1,0 +1,1 @@
+"""Measured-data readers and writers on real and written files."""

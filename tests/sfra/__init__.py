@@ -1,0 +1,1 @@
+"""SFRA comparison against a healthy reference, on real sweeps."""

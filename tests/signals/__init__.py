@@ -1,0 +1,1 @@
+"""PRBS, H-bridge and PRIS signals; spectral estimation and its uncertainty."""

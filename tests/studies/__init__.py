@@ -1,0 +1,1 @@
+"""The thesis's studies and the real-data fits."""

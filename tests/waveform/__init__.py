@@ -1,0 +1,1 @@
+"""Diagnosis from PRIS waveform records."""
