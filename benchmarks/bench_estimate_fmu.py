@@ -140,7 +140,7 @@ def ladder_estimate(a: argparse.Namespace, d: Path, rec: str, truth: dict[str, f
 
     cpath = out / f"ladder-{Path(rec).stem}.json"
     cpath.write_text(json.dumps(ladder_config(d, rec, truth, a), indent=1))
-    cmd = [sys.executable, "-m", "pris_cosim.cli.commands", "estimate", "--config", str(cpath), "--json",
+    cmd = [sys.executable, "-m", "pris_cosim", "estimate", "--config", str(cpath), "--json",
            "--out", str(out / f"ladder-{Path(rec).stem}")]
     if a.workers:
         cmd += ["--workers", str(a.workers)]

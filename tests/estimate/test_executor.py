@@ -262,7 +262,7 @@ def test_csv_is_regenerated_from_runs(markers, tmp_path):
     assert [int(row["result.y"]) for row in rows] == [0, 1, 4, 9]
     assert [row["kwargs.x"] for row in rows] == ["0", "1", "2", "3"]
     assert json.loads(rows[3]["result.vector"]) == [0, 3, 6]
-    assert rows[1]["label"] == "case 1" and rows[1]["fn"] == "test_executor:counted"
+    assert rows[1]["label"] == "case 1" and rows[1]["fn"] == "estimate.test_executor:counted"
 
 
 def test_stored_run_with_other_arguments_is_refused(markers, tmp_path):

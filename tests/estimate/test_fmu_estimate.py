@@ -217,7 +217,7 @@ def test_bad_fmu_config_one_line(tmp_path, two_record, change, needle):
     cfg.update(change)
     p = tmp_path / "c.json"
     p.write_text(json.dumps(cfg))
-    r = subprocess.run([sys.executable, "-m", "pris_cosim.cli.commands", "estimate", "--config", str(p), "--out",
+    r = subprocess.run([sys.executable, "-m", "pris_cosim", "estimate", "--config", str(p), "--out",
                         str(tmp_path / "o")], capture_output=True, text=True, timeout=120, cwd=REPO)
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and needle in r.stderr, r.stderr

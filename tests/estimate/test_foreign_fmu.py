@@ -35,7 +35,7 @@ def built(tmp_path_factory):
 def _estimate(cfg: dict, tmp: Path) -> dict:
     path = tmp / "cfg.json"
     path.write_text(json.dumps(cfg))
-    p = subprocess.run([sys.executable, "-m", "pris_cosim.cli.commands", "estimate", "--config", str(path), "--json",
+    p = subprocess.run([sys.executable, "-m", "pris_cosim", "estimate", "--config", str(path), "--json",
                         "--quiet", "--out", str(tmp / "out"), "--workers", "2"], cwd=REPO, capture_output=True,
                        text=True)
     line = next((ln for ln in p.stdout.splitlines() if ln.startswith("{")), None)

@@ -40,7 +40,7 @@ def test_netlist_matches_builtin_model(netlist_dir):
 def test_unknown_port_one_line(tmp_path, netlist_dir):
     p = tmp_path / "c.json"
     p.write_text(json.dumps(_cfg(netlist_dir, port="nowhere")))
-    r = subprocess.run([sys.executable, "-m", "pris_cosim.cli.commands", "estimate", "--config", str(p)],
+    r = subprocess.run([sys.executable, "-m", "pris_cosim", "estimate", "--config", str(p)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "nowhere" in r.stderr
@@ -98,7 +98,7 @@ def test_bridge_drive_without_source_one_line(tmp_path, netlist_dir):
     cfg = _cfg(netlist_dir, approach="time", drive="bridge", target={"kind": "waveforms-csv", "path": str(rec)})
     p = tmp_path / "c.json"
     p.write_text(json.dumps(cfg))
-    r = subprocess.run([sys.executable, "-m", "pris_cosim.cli.commands", "estimate", "--config", str(p)],
+    r = subprocess.run([sys.executable, "-m", "pris_cosim", "estimate", "--config", str(p)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "source" in r.stderr

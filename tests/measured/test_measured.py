@@ -426,6 +426,7 @@ def test_failed_write_leaves_original_intact(tmp_path, monkeypatch, writer):
 
 def test_failed_touchstone_write_leaves_original_intact(tmp_path, monkeypatch):
     """Touchstone text comes from scikit-rf; a failure while it is written keeps the target."""
+    from pris_cosim.measured import core as C
     from pris_cosim.measured import touchstone as T
 
     target = tmp_path / "target.s1p"
@@ -439,8 +440,8 @@ def test_failed_touchstone_write_leaves_original_intact(tmp_path, monkeypatch):
 
         return real(path, half, binary)
 
-    real = M._atomic_write
-    monkeypatch.setattr(M, "_atomic_write", failing)
+    real = C._atomic_write
+    monkeypatch.setattr(C, "_atomic_write", failing)
     with pytest.raises(RuntimeError, match="simulated failure"):
         write_touchstone_z(target, random_responses(n=40))
     assert target.read_bytes() == original
