@@ -21,8 +21,18 @@ errors equal our Jacobi master's to all digits shown. Wall times are
 divided by that monolithic run's. A second table gives, per master, the
 largest step of the ladder with both errors at most 1 %.
 
-    python benchmarks/bench_cosim.py [--part exact|coupling|all] [--order 12] [--fs 1e7] [--no-ngspice]
-                                     [--bits N] [--json FILE]
+Part ``splits``: each way of cutting the arrangement into an SSP system
+(``build-fmu --ssp --split bridge|thesis``) run as its archive says: the
+shipped archive ``fmus/<case>/<name>.ssp`` (bridge split) and the thesis
+split's archive written from the shipped source and DUT FMUs, each at its
+default step over its whole default experiment, in every SSP master
+available: libcosim (``libcosim_run``), ecos (``ecos_run``) and fmpy's SSP
+master (``fmpy.ssp.simulation.simulate_ssp``). Errors are relative RMS on
+``v_in`` and ``i_in`` against the monolithic FMU run by fmpy on the same
+grid; written to ``benchmarks/results/bench_cosim_splits.json``.
+
+    python benchmarks/bench_cosim.py [--part exact|coupling|splits|all] [--order 12] [--fs 1e7] [--no-ngspice]
+                                     [--bits N] [--json FILE] [--masters libcosim,ecos,fmpy.ssp]
 """
 
 from __future__ import annotations
@@ -36,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pris_cosim.fmi import codegen, cosim, build as fmi, libcosim_run
+from pris_cosim.fmi import codegen, cosim, ecos_run, build as fmi, libcosim_run, ssp
 from pris_cosim.circuits import ngspice
 from pris_cosim.lab import timedomain as td
 from pris_cosim.fmi.cosim_exact import cosimulate_exact
@@ -64,9 +74,7 @@ LIMIT = 0.01
 
 def fastest_period(model: str, port: str, case) -> float:
     """Period (s) of the fastest oscillatory mode of the monolithic arrangement at its start values."""
-    m = codegen.arrangement_model(get_model(model).circuit, port, case.settings)
-    lam = np.linalg.eigvals(m.mna.state_space(m.circuit.resolve()).A[0])
-    return float(2 * np.pi / np.abs(lam.imag).max())
+    return ssp.fastest_period(codegen.arrangement_model(get_model(model).circuit, port, case.settings))
 
 
 def coupling(bits: int | None, out_tables: list, figures: dict) -> None:
@@ -137,9 +145,83 @@ def coupling(bits: int | None, out_tables: list, figures: dict) -> None:
         ["case", "master", "step (ns)", "step / fastest period", "fastest period (us)", "note"], guidance))
 
 
+SPLIT_MASTERS = ("libcosim", "ecos", "fmpy.ssp")
+
+
+def _run_master(master: str, system: Path, tmp: Path) -> tuple[dict, float]:
+    """One SSP archive at its default step over its default experiment; libcosim and ecos in a subprocess."""
+    import subprocess
+
+    stop, step = ssp.default_experiment(system)
+    n = round(stop / step)
+    if master == "fmpy.ssp":
+        from fmpy.ssp.simulation import simulate_ssp
+
+        t0 = time.perf_counter()
+        res = simulate_ssp(str(system), stop_time=stop, step_size=step)
+        wall = time.perf_counter() - t0
+        return {name: np.asarray(res[name][:n]) for name in res.dtype.names if name != "time"}, wall
+    module = {"libcosim": ["pris_cosim.fmi.libcosim_run", "ssp"], "ecos": ["pris_cosim.fmi.ecos_run"]}[master]
+    out = tmp / f"{master}.npz"
+    proc = subprocess.run([sys.executable, "-m", *module, str(system), "--out", str(out)], capture_output=True,
+                          text=True, cwd=ROOT)
+    if proc.returncode:
+        raise RuntimeError(f"{master} failed on {system.name}: {proc.stderr.strip()[-500:]}")
+    wall = json.loads(proc.stdout.strip().splitlines()[-1])["wall_s"]
+    with np.load(out) as data:
+        return {k: data[k] for k in data.files}, wall
+
+
+def splits(masters: list[str], out_tables: list, figures: dict) -> None:
+    """Error of each split's archive at its default step over its default experiment, in each SSP master."""
+    available = {"libcosim": libcosim_run.available(), "ecos": ecos_run.available(), "fmpy.ssp": True}
+    for m in masters:
+        if not available[m]:
+            print(f"{m} is not available: its rows are left out", file=sys.stderr)
+    rows = []
+    for name, folder, base, model, port, case, *_ in COUPLING_CASES:
+        shipped = ROOT / "fmus" / folder
+        with tempfile.TemporaryDirectory(prefix="bench-splits-") as tmp:
+            tmp = Path(tmp)
+            guidance = ssp.step_guidance("thesis", case.fmu_experiment[1], case.settings.fclk,
+                                         fastest_period(model, port, case))
+            systems = {"bridge": shipped / f"{base}.ssp",
+                       "thesis": ssp.write_ssp(shipped / f"{base}_source.fmu", shipped / f"{base}_dut.fmu",
+                                               tmp / f"{base}_thesis.ssp", name=base, split="thesis",
+                                               guidance=guidance)}
+            stop, step = ssp.default_experiment(systems["bridge"])
+            t0 = time.perf_counter()
+            with cosim.FmuRunner(shipped / f"{base}_pris.fmu") as r:
+                ref = r.run(stop, step, output=["v_in", "i_in"])
+            t_ref = time.perf_counter() - t0
+            n = round(stop / step)
+            for split, system in systems.items():
+                (v_label, _), (i_label, _) = [(f"{c}.{v}", v) for c, v in ssp.recorded_outputs(system)[:2]]
+                for master in masters:
+                    if not available[master]:
+                        continue
+                    print(f"{name}, {split} split, {master}: {n} steps of {step * 1e9:g} ns ...", file=sys.stderr,
+                          flush=True)
+                    res, wall = _run_master(master, system, tmp)
+                    ev = cosim.relative_rms(res[v_label][:n], ref["v_in"][1:])
+                    ei = cosim.relative_rms(res[i_label][:n], ref["i_in"][1:])
+                    rows.append([name, split, round(step * 1e9, 3), n, master, 100 * ev, 100 * ei, wall,
+                                 wall / t_ref])
+                    print(f"  v_in {100 * ev:.3g} %  i_in {100 * ei:.3g} %  wall {wall:.2f} s", flush=True)
+                    figures[f"{name}_{split}_{master}_v_in_error"] = {"value": 100 * ev, "unit": "%"}
+                    figures[f"{name}_{split}_{master}_i_in_error"] = {"value": 100 * ei, "unit": "%"}
+    out_tables.append(table(
+        "Each split's SSP archive at its default step over its whole default experiment, against the monolithic "
+        "FMU in fmpy (relative RMS)",
+        ["case", "split", "step (ns)", "steps", "master", "v_in error (%)", "i_in error (%)", "wall (s)",
+         "wall / monolithic"], rows))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--part", choices=("exact", "coupling", "all"), default="all")
+    ap.add_argument("--part", choices=("exact", "coupling", "splits", "all"), default="all")
+    ap.add_argument("--masters", default=",".join(SPLIT_MASTERS),
+                    help="SSP masters of the splits part, comma-separated (default: all three)")
     ap.add_argument("--order", type=int, default=12)
     ap.add_argument("--fs", type=float, default=10e6)
     ap.add_argument("--ngspice-max-step", type=float, default=20e-9)
@@ -152,6 +234,21 @@ def main(argv: list[str] | None = None) -> int:
     figures: dict = {}
     if args.part in ("exact", "all"):
         exact(args, tables)
+    if args.part in ("splits", "all"):
+        masters = [m.strip() for m in args.masters.split(",") if m.strip()]
+        bad = sorted(set(masters) - set(SPLIT_MASTERS))
+        if bad:
+            print(f"bench_cosim: error: --masters: unknown master {bad[0]!r} (choose from "
+                  f"{', '.join(SPLIT_MASTERS)})", file=sys.stderr)
+            return 2
+        split_tables: list = []
+        split_figures: dict = {}
+        splits(masters, split_tables, split_figures)
+        write_results("bench_cosim_splits", tables=split_tables, figures=split_figures,
+                      summary="each split's SSP archive (bridge, thesis) at its default step over its default "
+                              "experiment in libcosim, ecos and fmpy's SSP master, against the monolithic FMU")
+        if args.part == "splits":
+            return 0
     if args.part in ("coupling", "all"):
         coupling(args.bits, tables, figures)
     write_results("bench_cosim", tables=tables, figures=figures,

@@ -19,6 +19,8 @@ from pris_cosim.circuits.circuit import Circuit
 from pris_cosim.errors import CircuitError
 
 BRIDGE = "Vbridge"
+#: Node of the H-bridge output (without switch parasitics; with them the bridge drives ``src_hb``).
+BRIDGE_NODE = "src_h"
 SENSE_INDUCTOR = "Lpris"
 
 
@@ -71,7 +73,7 @@ class SourceSettings:
 def source_circuit(settings: SourceSettings, terminal: str = "dut") -> Circuit:
     """The source alone: bridge, parasitics, snubber, series RLC ending at node ``terminal``."""
     c = Circuit(title="PRIS source")
-    out = "src_h"
+    out = BRIDGE_NODE
     if settings.lsw > 0:
         c.add(BRIDGE, "src_hb", "0", 0.0, source_spec="DC 0")
         c.add("Lsw", "src_hb", out, settings.lsw)

@@ -65,8 +65,13 @@ def register(sub: Any) -> None:
     b.add_argument("--fmi-version", dest="fmi_version", type=int, choices=(2, 3), default=2,
                    help="FMI version of the FMUs (default 2)")
     b.add_argument("--ssp", action="store_true",
-                   help="also write NAME.ssp: an SSP 1.0 system of the source and DUT FMUs with their connections, "
-                        "parameter values and default experiment (needs --with-source)")
+                   help="also write NAME.ssp: an SSP 1.0 system of two FMUs with their connections, parameter "
+                        "values, default experiment and step guidance (needs --with-source)")
+    b.add_argument("--split", choices=("bridge", "thesis"), default=None,
+                   help="where --ssp cuts the arrangement: 'bridge' (default) = H-bridge FMU driving an FMU of the "
+                        "series RLC and winding through the bridge voltage, exact in fixed-step masters at any step "
+                        "dividing the PRBS bit; 'thesis' = source (bridge and RLC) and winding coupled by v_in and "
+                        "i_in, which fixed-step masters need far smaller steps for")
     _source_options(b, required=False)
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_build_fmu)
@@ -312,13 +317,17 @@ def _simulate_cosim(circuit: Circuit, port: str, settings: SourceSettings, short
 def cmd_build_fmu(args: argparse.Namespace) -> int:
     """``build-fmu``: write the FMUs (and .mo files); with ``--json`` print ``{"fmus": [paths]}``.
 
-    With ``--ssp`` also the SSP 1.0 archive of source and DUT (``"ssp": path`` in the JSON).
+    With ``--ssp`` also the SSP 1.0 archive (``"ssp": path`` in the JSON): of the H-bridge and load FMUs
+    (``--split bridge``, the default) or of the source and DUT FMUs (``--split thesis``).
     """
     from pris_cosim.fmi.build import build_pris_fmus
     from pris_cosim.fmi.thesis_cases import case_for
 
     if getattr(args, "ssp", False) and not args.with_source:
         raise ValueError("--ssp needs --with-source (the system couples the source FMU and the DUT FMU)")
+    if getattr(args, "split", None) and not getattr(args, "ssp", False):
+        raise ValueError("--split needs --ssp (it chooses the FMUs of the SSP system)")
+    split = (getattr(args, "split", None) or "bridge") if getattr(args, "ssp", False) else None
     circuit, model = load_circuit(args)
     port, shorts = _port_and_shorts(circuit, model, args)
     case = case_for(model.name, port) if model is not None else None
@@ -328,14 +337,25 @@ def cmd_build_fmu(args: argparse.Namespace) -> int:
                                                                                case.settings.fclk)
     experiment = case.fmu_experiment if same_prbs else None
     paths = build_pris_fmus(circuit, port, args.out, settings, shorts, name=name, experiment=experiment,
-                            dut_experiment=case.fmu_experiment if case else None, fmi_version=args.fmi_version)
+                            dut_experiment=case.fmu_experiment if case else None, fmi_version=args.fmi_version,
+                            bridge_split=split == "bridge")
     fmus = [str(p) for p in paths.values()]
     ssp = None
-    if getattr(args, "ssp", False):
-        from pris_cosim.fmi.ssp import write_ssp
+    if split:
+        from pris_cosim.fmi.codegen import arrangement_model
+        from pris_cosim.fmi.ssp import fastest_period, step_guidance, write_ssp
 
         system = Path(paths["dut"]).stem.removesuffix("_dut")  # the FMUs' identifier base
-        ssp = str(write_ssp(paths["source"], paths["dut"], Path(args.out) / f"{system}.ssp", name=system))
+        first, second = ("bridge", "load") if split == "bridge" else ("source", "dut")
+        guidance = None
+        if split == "thesis":
+            from fmpy.model_description import read_model_description
+
+            exp = read_model_description(str(paths["source"])).defaultExperiment
+            guidance = step_guidance(split, float(exp.stepSize), settings.fclk,
+                                     fastest_period(arrangement_model(circuit, port, settings, shorts)))
+        ssp = str(write_ssp(paths[first], paths[second], Path(args.out) / f"{system}.ssp", name=system, split=split,
+                            guidance=guidance))
     if args.json:
         _emit({"fmus": fmus} | ({"ssp": ssp} if ssp else {}))
     else:

@@ -27,8 +27,8 @@ from xml.sax.saxutils import quoteattr
 from pris_cosim import __version__
 from pris_cosim.circuits.arrangement import SourceSettings
 from pris_cosim.circuits.circuit import Circuit
-from pris_cosim.fmi.codegen import (NetworkModel, Variable, arrangement_model, c_source_files, dut_model,
-    generate_sources, source_model)
+from pris_cosim.fmi.codegen import (NetworkModel, Variable, arrangement_model, c_source_files, bridge_model,
+    dut_model, generate_sources, load_model, source_model)
 
 #: SI base-unit exponents of the units the FMUs use (kg, m, s, A).
 _BASE_UNITS: dict[str, dict[str, int]] = {
@@ -189,9 +189,7 @@ def model_description(model: NetworkModel, guid: str) -> str:
         "    <Outputs>",
         *outputs,
         "    </Outputs>",
-        "    <Derivatives>",
-        *derivatives,
-        "    </Derivatives>",
+        *(["    <Derivatives>", *derivatives, "    </Derivatives>"] if derivatives else []),
         "    <InitialUnknowns>",
         *[unknown(i, init_deps[i]) for i in initial],
         "    </InitialUnknowns>",
@@ -338,6 +336,7 @@ def build_pris_fmus(
     experiment: tuple[float, float] | None = None,
     dut_experiment: tuple[float, float] | None = None,
     fmi_version: int = 2,
+    bridge_split: bool = False,
 ) -> dict[str, Path]:
     """Build the DUT FMU, and with source settings also the source and monolithic FMUs.
 
@@ -361,11 +360,14 @@ def build_pris_fmus(
         the network's fastest time constant).
     fmi_version : {2, 3}
         FMI 2.0 or FMI 3.0 FMUs.
+    bridge_split : bool
+        With source settings, also the H-bridge FMU (``NAME_bridge``) and
+        the FMU of what it drives (``NAME_load``: series RLC and DUT).
 
     Returns
     -------
     dict
-        ``{"dut": path[, "source": path, "arrangement": path]}``.
+        ``{"dut": path[, "source": path, "arrangement": path[, "bridge": path, "load": path]]}``.
 
     Raises
     ------
@@ -384,4 +386,9 @@ def build_pris_fmus(
         out["arrangement"] = build_fmu(
             timed(arrangement_model(dut, port, settings, shorts, name=f"{name}_pris"), experiment), out_dir,
             fmi_version=v)
+        if bridge_split:
+            out["bridge"] = build_fmu(timed(bridge_model(settings, name=f"{name}_bridge"), experiment), out_dir,
+                                      fmi_version=v)
+            out["load"] = build_fmu(timed(load_model(dut, port, settings, shorts, name=f"{name}_load"), experiment),
+                                    out_dir, fmi_version=v)
     return out

@@ -10,7 +10,7 @@ Q0/Q1, input maps, variable layout) and the parameter ties rendered with
 assembles G, Cn and L from element values at run time, reduces them to
 state-space form exactly as :meth:`MNA.state_space` does, and steps it.
 
-Three kinds of FMU:
+Five kinds of FMU:
 
 ``source``
     The PRIS source: PRBS-driven H-bridge, optional switch parasitics and
@@ -22,6 +22,14 @@ Three kinds of FMU:
 ``arrangement``
     Source and DUT in one network (the monolithic reference). No input;
     outputs ``v_in``, ``i_in``, ``v_bprbs`` and ``v_<probe>``.
+``bridge``
+    The PRBS-driven H-bridge alone (no states). No input; output
+    ``v_bprbs`` (V), piecewise constant between PRBS clock instants.
+``load``
+    What the bridge drives: optional switch parasitics and snubber, the
+    series Rpris-Lpris-Cpris and the DUT. Input ``v_bprbs`` (V); outputs
+    ``v_in``, ``i_in`` and ``v_<probe>``. Coupled to a ``bridge`` FMU it is
+    the arrangement cut where the only signal is the bridge voltage.
 """
 
 from __future__ import annotations
@@ -34,7 +42,8 @@ from importlib import resources
 
 import numpy as np
 
-from pris_cosim.circuits.arrangement import BRIDGE, SENSE_INDUCTOR, SourceSettings, pris_arrangement, source_circuit
+from pris_cosim.circuits.arrangement import (BRIDGE, BRIDGE_NODE, SENSE_INDUCTOR, SourceSettings, pris_arrangement,
+    source_circuit)
 from pris_cosim.circuits.circuit import GROUND, Circuit
 from pris_cosim.errors import CircuitError, ExpressionError
 from pris_cosim.circuits.expressions import Expression
@@ -140,7 +149,7 @@ class NetworkModel:
 
     Attributes
     ----------
-    kind : {"source", "dut", "arrangement"}
+    kind : {"source", "dut", "arrangement", "bridge", "load"}
     identifier : str
         FMI model identifier (a C identifier; the shared library's name).
     circuit : Circuit
@@ -199,14 +208,14 @@ class NetworkModel:
 
     @property
     def state_vr0(self) -> int:
-        """Value reference of the first state (states have consecutive vrs)."""
-        return next(v.vr for v in self.real if v.causality == "local" and v.variability == "continuous"
-                    and v.derivative_of is None)
+        """Value reference of the first state (states have consecutive vrs; one past the last Real without states)."""
+        return next((v.vr for v in self.real if v.causality == "local" and v.variability == "continuous"
+                     and v.derivative_of is None), len(self.real))
 
     @property
     def deriv_vr0(self) -> int:
-        """Value reference of the first state derivative."""
-        return next(v.vr for v in self.real if v.derivative_of is not None)
+        """Value reference of the first state derivative (one past the last Real without states)."""
+        return next((v.vr for v in self.real if v.derivative_of is not None), len(self.real))
 
 
 # ---------------------------------------------------------------------- circuits
@@ -297,11 +306,15 @@ def _assemble(
     settings: SourceSettings | None,
     ext_input: tuple[str, str, str] | None,
     outputs: Sequence[tuple[str, str, str, int, int]],
+    scale: SourceSettings | None = None,
 ) -> NetworkModel:
     """Lay out the FMI variables of a network and collect its tie statements.
 
     ``ext_input`` is ``(name, unit, description)`` of the FMU input; each
-    output is ``(name, unit, description, kind, index)``.
+    output is ``(name, unit, description, kind, index)``. With ``settings``
+    the network holds the PRBS generator driving ``Vbridge``; without,
+    ``Vbridge`` (if any) is the FMU input, and ``scale`` (source settings)
+    gives the state nominals and the default experiment.
     """
     values = {k: float(v) for k, v in checked_values(circuit).items()}
     lay = _Layout()
@@ -360,7 +373,7 @@ def _assemble(
         what = f"current through inductor {label[2:-1]}" if unit == "A" else f"capacitive voltage {label}"
         state_vars.append(lay.add(label, causality="local", variability="continuous", initial="exact", start=0.0,
                                   unit=unit, description=f"state: {what}", settable=SET_INIT,
-                                  nominal=_state_nominal(unit, settings)))
+                                  nominal=_state_nominal(unit, settings or scale)))
     for sv in state_vars:
         lay.add(f"der({sv.name})", causality="local", variability="continuous", initial="calculated", start=None,
                 unit=f"{sv.unit}/s", description=f"time derivative of {sv.name}", derivative_of=sv.vr)
@@ -372,7 +385,7 @@ def _assemble(
     input_vrs = []
     bridge = -1
     for j, label in enumerate(mna.inputs):
-        if label == f"v({BRIDGE})":
+        if label == f"v({BRIDGE})" and settings is not None:
             input_vrs.append(-1)
             bridge = j
         else:
@@ -385,7 +398,7 @@ def _assemble(
                         input_vrs=input_vrs, bridge_input=bridge, element_vr=slots, ties=ties,
                         output_deps=out_deps, derivative_deps=der_deps, output_param_deps=out_params,
                         derivative_param_deps=der_params, calculated_deps=calc_deps,
-                        experiment=default_experiment(mna, values, settings))
+                        experiment=default_experiment(mna, values, settings or scale))
 
 
 def _parameter_deps(circuit: Circuit, mna: MNA, values: Mapping[str, float],
@@ -594,6 +607,65 @@ def arrangement_model(dut: Circuit, port: str, settings: SourceSettings, shorts:
     ]
     outputs += _probe_outputs(circuit, mna, port)
     return _assemble("arrangement", name, circuit.title, circuit, mna, port, settings, None, outputs)
+
+
+def bridge_model(settings: SourceSettings, name: str = "pris_bridge") -> NetworkModel:
+    """The H-bridge FMU: the PRBS generator and the bridge voltage alone, no state, no input.
+
+    Output ``v_bprbs`` (V): ``+-vdc``, constant between PRBS clock instants.
+    At a clock instant that ends a communication step the output already
+    holds the new level, so a master that holds it over the next step feeds
+    a :func:`load_model` FMU exactly the bridge voltage of that step.
+
+    Parameters
+    ----------
+    settings : SourceSettings
+        PRBS and ``vdc`` start values (the series RLC and parasitics belong
+        to the load).
+    name : str
+        Model identifier.
+    """
+    circuit = Circuit(title="PRIS H-bridge")
+    circuit.add(BRIDGE, BRIDGE_NODE, GROUND, 0.0, source_spec="DC 0")
+    mna = MNA(circuit, voltage_inputs=[BRIDGE])
+    outputs = [("v_bprbs", "V", "commanded H-bridge voltage", OUT_INPUT, mna.inputs.index(f"v({BRIDGE})"))]
+    return _assemble("bridge", name, "PRIS H-bridge: PRBS-driven bridge voltage", circuit, mna, None, settings, None,
+                     outputs)
+
+
+def load_model(dut: Circuit, port: str, settings: SourceSettings, shorts: Sequence[str] = (),
+               name: str = "pris_load") -> NetworkModel:
+    """What the H-bridge drives: the source's passive part and the DUT, with the bridge voltage as input.
+
+    The network is the monolithic arrangement's (:func:`arrangement_model`)
+    with ``Vbridge`` set from the FMU input ``v_bprbs`` (V) instead of the
+    PRBS generator. Outputs ``v_in``, ``i_in`` and the probe voltages.
+
+    Parameters
+    ----------
+    dut : Circuit
+    port : str
+        Driven DUT node.
+    settings : SourceSettings
+        Element values of the series RLC and parasitics; PRBS settings give
+        the default experiment and state nominals only.
+    shorts : sequence of str
+        DUT nodes tied to ground (test configuration).
+    name : str
+        Model identifier.
+    """
+    circuit = pris_arrangement(dut, port, settings, shorts)
+    port = circuit.ports[0]
+    mna = MNA(circuit, voltage_inputs=[BRIDGE])
+    outputs = [
+        ("v_in", "V", f"DUT terminal voltage v({port})", OUT_NODE, mna.nodes.index(port)),
+        ("i_in", "A", "current from the source RLC into the DUT terminal", OUT_STATE,
+         mna.states.index(f"i({SENSE_INDUCTOR})")),
+    ]
+    outputs += _probe_outputs(circuit, mna, port)
+    title = f"series RLC and {dut.title or 'DUT'} driven at {port} by the H-bridge voltage"
+    return _assemble("load", name, title, circuit, mna, port, None, ("v_bprbs", "V", "H-bridge voltage"), outputs,
+                     scale=settings)
 
 
 # ---------------------------------------------------------------------- C text

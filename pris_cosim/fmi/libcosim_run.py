@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pris_cosim.errors import CircuitError
+
 #: How to install the package when it is missing.
 INSTALL_HINT = "libcosimpy is not installed (pip install libcosimpy)"
 
@@ -184,7 +186,7 @@ def run_pair(source: str | Path, dut: str | Path, stop: float, step: float,
 
 
 def run_ssp(ssp: str | Path, stop: float | None = None, step: float | None = None,
-            record: Sequence[tuple[str, str]] = (("source", "i_in"), ("dut", "v_in")),
+            record: Sequence[tuple[str, str]] | None = None,
             ) -> tuple[dict[str, np.ndarray], float]:
     """An SSP system (``.ssp`` archive or ``.ssd``) loaded by ``CosimExecution.from_ssp_file``.
 
@@ -195,7 +197,9 @@ def run_ssp(ssp: str | Path, stop: float | None = None, step: float | None = Non
         Default: the system's default experiment.
     step : float, s, optional
         Default: the step of the system's default experiment.
-    record : sequence of (component, variable)
+    record : sequence of (component, variable), optional
+        Default: the terminal voltage and current and the bridge voltage
+        (:func:`pris_cosim.fmi.ssp.recorded_outputs`).
 
     Returns
     -------
@@ -203,9 +207,11 @@ def run_ssp(ssp: str | Path, stop: float | None = None, step: float | None = Non
         ``time_s`` and ``component.variable`` arrays; the wall time in s.
     """
     Execution, _, Observer, VarType = _lib()
-    from pris_cosim.fmi.ssp import default_experiment
+    from pris_cosim.fmi.ssp import default_experiment, recorded_outputs
 
     exp_stop, exp_step = default_experiment(ssp)
+    if record is None:
+        record = recorded_outputs(ssp)
     stop_ns = _ns(stop if stop is not None else exp_stop)
     step_ns = _ns(step if step is not None else exp_step)
     ex = (Execution.from_ssp_file(str(Path(ssp).resolve())) if step is None
@@ -243,7 +249,7 @@ def main(argv: list[str] | None = None) -> int:
                                  _values(args.dut_set))
         else:
             res, wall = run_ssp(args.files[0], args.stop, step)
-    except (ValueError, RuntimeError, OSError) as exc:
+    except (ValueError, RuntimeError, OSError, CircuitError) as exc:
         print(f"libcosim_run: error: {exc}", file=sys.stderr)
         return 2
     np.savez(args.out, **res)

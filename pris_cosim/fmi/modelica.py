@@ -224,6 +224,9 @@ def _interface(model: NetworkModel, inst: Mapping[str, str], pins: dict[str, lis
         pins[GROUND].append("Iin.p")
         pins[model.port].append("Iin.n")
         eqs.append("  connect(i_in, Iin.i);")
+    if model.kind == "load":
+        decl.append('  Modelica.Blocks.Interfaces.RealInput v_bprbs "H-bridge voltage, V";')
+        eqs.append(f"  connect(v_bprbs, {inst[BRIDGE.lower()]}.v);")
     if model.kind == "source":
         decl.append('  Modelica.Blocks.Interfaces.RealInput v_in "DUT terminal voltage, V";')
         eqs.append(f"  connect(v_in, {inst[SOURCE_TERMINAL_INPUT.lower()]}.v);")

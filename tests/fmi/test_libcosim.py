@@ -136,7 +136,7 @@ def test_shipped_ssp_runs_in_libcosim_at_its_default_step(tmp_path, system):
     lc = libcosim(tmp_path, "ssp", str(system), "--stop", repr(200 * step))
     assert lc["time_s"].size == 200
     np.testing.assert_allclose(lc["time_s"], np.arange(1, 201) * step, rtol=1e-12)
-    assert np.abs(lc["dut.v_in"]).max() > 0 and np.abs(lc["source.i_in"]).max() > 0
+    assert np.abs(lc["load.v_in"]).max() > 0 and np.abs(lc["load.i_in"]).max() > 0
 
 
 def test_fmi3_fmus_are_refused_before_libcosim_sees_them(tmp_path):

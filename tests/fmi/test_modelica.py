@@ -101,3 +101,24 @@ def test_dut_text_equals_current_injection(session):
     n = got["v_in"].size
     ref = td.simulate_current_injection(circuit, "n1", np.full(n, 1e-3), fs)
     assert _rel(got["v_in"], ref["v_in"]) < 1e-6
+
+
+def test_bridge_text_gives_the_prbs(session):
+    fs, stop = 1e7, 1e-4
+    got = _simulate(session, codegen.bridge_model(THREE, name="bri"), stop, fs)
+    n = got["v_bprbs"].size
+    bits = lfsr_prbs(THREE.prbs_order, 1)
+    bridge = np.where(bits[(np.arange(n) * THREE.fclk / fs).astype(int) % bits.size] == 1, THREE.vdc, -THREE.vdc)
+    np.testing.assert_array_equal(got["v_bprbs"], bridge)
+
+
+def test_load_text_equals_the_arrangement_driven_by_a_constant_bridge_voltage(session):
+    fs, stop = 1e7, 5e-5
+    circuit = get_model("three-section").circuit
+    got = _simulate(session, codegen.load_model(circuit, "n1", THREE, name="lod"), stop, fs,
+                    inputs={"v_bprbs": 5.0})
+    arr = codegen.arrangement_model(circuit, "n1", THREE)
+    n = got["v_in"].size
+    x, y = td.simulate_pwc(arr.mna.state_space(arr.circuit.resolve()), np.full((n, 1), 5.0), 1 / fs)
+    assert _rel(got["i_in"], x[:, arr.mna.states.index("i(Lpris)")]) < 1e-6
+    assert _rel(got["v_in"], y[:, arr.mna.nodes.index("n1")]) < 1e-6

@@ -1,4 +1,4 @@
-"""SSP 1.0 export of source and DUT FMUs: what the archive holds, read back with ElementTree."""
+"""SSP 1.0 export of the PRIS arrangement (bridge and thesis splits): the archive read back with ElementTree."""
 
 from __future__ import annotations
 
@@ -76,6 +76,7 @@ def test_archive_holds_components_connections_parameters_and_experiment(tmp_path
     assert float(exp.get("stopTime")) == float(md.defaultExperiment.stopTime)
     assert float(algo.get("baseStepSize")) == float(md.defaultExperiment.stepSize) == 3125e-9
     assert ssp.default_experiment(path) == (0.3, 3125e-9)
+    assert "Step guidance: fixed-step masters hold v_in and i_in" in root.get("description")
 
 
 def test_values_replace_start_values_and_bad_names_are_refused(tmp_path):
@@ -98,18 +99,59 @@ def test_build_fmu_refuses_ssp_without_the_source(tmp_path):
         "pris-cosim build-fmu: error: --ssp needs --with-source (the system couples the source FMU and the DUT FMU)"]
 
 
-@pytest.mark.slow
-def test_build_fmu_writes_the_ssp_beside_the_fmus(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "pris_cosim", "build-fmu", "--model", "three-section", "--port",
-                           "n1", "--out", str(tmp_path), "--with-source", "--ssp", "--json"],
+def test_build_fmu_refuses_split_without_ssp(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "pris_cosim", "build-fmu", "--model", "two-section", "--port", "in",
+                           "--out", str(tmp_path), "--with-source", "--split", "thesis"],
                           capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        "pris-cosim build-fmu: error: --split needs --ssp (it chooses the FMUs of the SSP system)"]
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("split, kinds", [(None, ("bridge", "load")), ("thesis", ("source", "dut"))])
+def test_build_fmu_writes_the_ssp_beside_the_fmus(tmp_path, split, kinds):
+    proc = subprocess.run([sys.executable, "-m", "pris_cosim", "build-fmu", "--model", "three-section", "--port",
+                           "n1", "--out", str(tmp_path), "--with-source", "--ssp", "--json"]
+                          + (["--split", split] if split else []), capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert Path(out["ssp"]) == tmp_path / "three_section.ssp"
     with zipfile.ZipFile(out["ssp"]) as zf:
-        assert {"resources/three_section_source.fmu", "resources/three_section_dut.fmu",
-                "resources/three_section_source.ssv", "resources/three_section_dut.ssv"} <= set(zf.namelist())
+        assert {f"resources/three_section_{k}.{ext}" for k in kinds for ext in ("fmu", "ssv")} <= set(zf.namelist())
+    assert ssp.components(out["ssp"]) == list(kinds)
     assert ssp.default_experiment(out["ssp"]) == (pytest.approx(4095 / 100e3), 80e-9)
+    text = ssp.read_ssd(out["ssp"])
+    if split == "thesis":  # the guidance names the arrangement's fastest period (1.13 us) and a thousandth of it
+        assert "period of 1.13e-06 s" in text and "steps near 1.1e-09 s" in text
+    else:
+        assert "the default step 8e-08 s divides it (125 steps per bit)" in text
+
+
+def test_bridge_split_archive_holds_one_connection_and_one_parameter_set_name(tmp_path):
+    path = ssp.write_ssp(TWO / "two_section_bridge.fmu", TWO / "two_section_load.fmu", tmp_path / "b.ssp")
+    assert ssp.detect_split(TWO / "two_section_bridge.fmu") == "bridge"
+    assert ssp.detect_split(TWO / "two_section_source.fmu") == "thesis"
+    with zipfile.ZipFile(path) as zf:
+        root = ElementTree.fromstring(zf.read("SystemStructure.ssd"))
+        links = {(c.get("startElement"), c.get("startConnector"), c.get("endElement"), c.get("endConnector"))
+                 for c in root.iter(f"{{{NS['ssd']}}}Connection")}
+        assert links == {("bridge", "v_bprbs", "load", "v_bprbs")}
+        names = {ElementTree.fromstring(zf.read(n)).get("name") for n in zf.namelist() if n.endswith(".ssv")}
+    assert names == {ssp.PARAMETER_SET}
+    assert ssp.recorded_outputs(path) == [("load", "v_in"), ("load", "i_in"), ("bridge", "v_bprbs")]
+    with pytest.raises(CircuitError, match="has no input 'v_bprbs'"):
+        ssp.write_ssp(TWO / "two_section_bridge.fmu", TWO / "two_section_dut.fmu", tmp_path / "x.ssp")
+
+
+def test_step_guidance_names_the_bit_and_whether_the_step_divides_it():
+    assert "(32 steps per bit)" in ssp.step_guidance("bridge", 3125e-9, 10e3)
+    assert "does not divide it" in ssp.step_guidance("bridge", 3e-6, 10e3)
+    text = ssp.step_guidance("thesis", 3125e-9, 10e3, fastest_period=170e-6)
+    assert "period of 0.00017 s" in text and "steps near 1.7e-07 s" in text
+    with pytest.raises(CircuitError, match="unknown split 'x'"):
+        ssp.step_guidance("x", 1e-6, 1e3)
 
 
 @pytest.mark.parametrize("folder, base", [("two-section", "two_section"), ("three-section", "three_section")])
@@ -117,11 +159,11 @@ def test_shipped_systems_hold_the_shipped_fmus(folder, base):
     """``fmus/<case>/<name>.ssp`` is current: its FMUs are the ones beside it, its values their start values."""
     path = ROOT / "fmus" / folder / f"{base}.ssp"
     with zipfile.ZipFile(path) as zf:
-        for kind in ("source", "dut"):
+        for kind in ("bridge", "load"):
             fmu = ROOT / "fmus" / folder / f"{base}_{kind}.fmu"
             assert zf.read(f"resources/{fmu.name}") == fmu.read_bytes(), fmu.name
             md = read_model_description(str(fmu))
             starts = {v.name: float(v.start) for v in md.modelVariables if v.causality == "parameter"}
             assert _parameter_set(zf, f"resources/{fmu.stem}.ssv") == starts
-    exp = read_model_description(str(ROOT / "fmus" / folder / f"{base}_source.fmu")).defaultExperiment
+    exp = read_model_description(str(ROOT / "fmus" / folder / f"{base}_bridge.fmu")).defaultExperiment
     assert ssp.default_experiment(path) == (float(exp.stopTime), float(exp.stepSize))

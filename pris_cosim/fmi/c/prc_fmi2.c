@@ -16,6 +16,7 @@
  * Inputs and parameters must be finite and inside their declared range;
  * tunable parameters (element values, vdc) re-assemble the model when set.
  */
+#include <float.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -324,10 +325,19 @@ static int catch_up(prc_inst *c, double t, double tol) {
     return changed;
 }
 
-static double switch_tol(prc_inst *c, double h) {
+/* How close to a switching instant a time counts as at it. A co-simulation master that advances its
+ * clock by adding the step h (t / h additions, each off by up to half an ulp of t) reaches a
+ * communication point up to about DBL_EPSILON * t * t / h away from the exact multiple of h; a
+ * switching instant that a step ends on must still switch there, so that the bridge voltage read at
+ * that point is the level of the next step. At least 1e-9 of the step (or PRBS bit), at most a
+ * quarter of it. Model exchange (h = 0) reaches the reported event times exactly. */
+static double switch_tol(prc_inst *c, double h, double t) {
     double tclk = 1.0 / fclk(c);
     double base = h > 0.0 && h < tclk ? h : tclk;
-    return 1e-9 * base;
+    double tol = 1e-9 * base;
+    double drift = h > 0.0 ? DBL_EPSILON * fabs(t) * (fabs(t) / h) : 0.0;
+    if (drift > tol) tol = drift;
+    return tol < 0.25 * base ? tol : 0.25 * base;
 }
 
 /* ------------------------------------------------------------------ common functions */
@@ -443,7 +453,7 @@ fmi2Status PRC2(fmi2ExitInitializationMode)(fmi2Component comp) {
     s = ensure_built(c, "fmi2ExitInitializationMode");
     if (s != fmi2OK) return s;
     reset_prbs(c);
-    if (has_bridge(c->m)) catch_up(c, c->time, switch_tol(c, 0.0));
+    if (has_bridge(c->m)) catch_up(c, c->time, switch_tol(c, 0.0, c->time));
     c->t_committed = c->time;
     c->state = ST_RUN;
     return fmi2OK;
@@ -810,7 +820,7 @@ fmi2Status PRC2(fmi2NewDiscreteStates)(fmi2Component comp, fmi2EventInfo *info) 
     if (has_bridge(c->m)) {
         /* the bridge voltage steps: the derivatives jump, so integrators must restart here */
         int before = current_bit(c);
-        if (catch_up(c, c->time, switch_tol(c, 0.0)) && current_bit(c) != before)
+        if (catch_up(c, c->time, switch_tol(c, 0.0, c->time)) && current_bit(c) != before)
             info->valuesOfContinuousStatesChanged = fmi2True;
         info->nextEventTimeDefined = fmi2True;
         info->nextEventTime = next_switch(c);
@@ -912,7 +922,7 @@ fmi2Status PRC2(fmi2DoStep)(fmi2Component comp, fmi2Real t0, fmi2Real h, fmi2Boo
                     h * fclk(c), c->m->max_switches);
     t = t0;
     t_end = t0 + h;
-    tol = has_bridge(c->m) ? switch_tol(c, h) : 0.0;
+    tol = has_bridge(c->m) ? switch_tol(c, h, t_end) : 0.0;
     if (has_bridge(c->m)) catch_up(c, t, tol);
     for (;;) {
         double seg_end = t_end, dt;
