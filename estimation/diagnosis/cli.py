@@ -32,9 +32,14 @@ def register(subparsers: Any) -> None:
     p.add_argument("--rload", type=si_value, help="load resistance if known, Ohm (waveform data)")
     p.add_argument("--report", metavar="DIR", help="write report.md with plots into DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    sf = p.add_argument_group("SFRA (two-port Touchstone sweeps against a healthy fingerprint)")
-    sf.add_argument("--reference", metavar="FILE", help="healthy two-port sweep (.s2p); with a two-port --measured "
-                    "sweep, fits a winding model to it and names the change that explains --measured")
+    sf = p.add_argument_group("SFRA (a new sweep against a healthy fingerprint)")
+    sf.add_argument("--reference", metavar="FILE", help="healthy sweep (.s2p, or an FRA instrument's CSV export); "
+                    "gives the DL/T 911 factors and verdict of --measured against it, and with two-port sweeps "
+                    "fits a winding model to it and names the change that explains --measured")
+    sf.add_argument("--repeat", metavar="FILE", help="a second healthy sweep (.s2p or CSV): the spread of the healthy "
+                    "pair per band, and the change judged against it")
+    sf.add_argument("--no-model", action="store_true", help="SFRA: the standard's factors (and --repeat) only, no "
+                    "winding model")
     sf.add_argument("--sections", type=_sections, metavar="N", help="force the section count of the reference model")
     sf.add_argument("--cache", metavar="DIR", help="reference-model cache (default $PRIS_COSIM_CACHE or "
                     "~/.cache/pris-cosim)")
@@ -85,9 +90,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             if args.report:
                 print(f"report: {out['report']}", file=sys.stderr)
         return 0
-    for opt in ("sections", "cache", "model_out"):
+    for opt in ("sections", "cache", "model_out", "repeat"):
         if getattr(args, opt, None) is not None:
             raise DiagnosisError(f"--{opt.replace('_', '-')} needs --reference")
+    if getattr(args, "no_model", False):
+        raise DiagnosisError("--no-model needs --reference")
     data = load_measured(args.measured, segment=args.segment)
     if isinstance(data, Waveforms) and (args.model or args.netlist):
         # a PRIS record of a winding: its input impedance diagnosed against the winding's design

@@ -150,7 +150,7 @@ def check_options(args: argparse.Namespace) -> None:
     def given(dest: str) -> bool:
         return v.get(dest) is not None
 
-    for dest in ("netlist", "measured", "reference"):
+    for dest in ("netlist", "measured", "reference", "repeat"):
         if given(dest):
             _input_file(_flag(dest), v[dest])
     if given("model_out"):

@@ -228,6 +228,7 @@ _BAD_OPTIONS = [
     ("diagnose", "--rload", "-1", "--rload -1 Ohm is outside the accepted range"),
     ("diagnose", "--report", "/dev/null/x", "--report: /dev/null is not a directory"),
     ("diagnose", "--reference", "{tmp}/missing.s2p", "--reference: file not found"),
+    ("diagnose", "--repeat", "{tmp}/missing.s2p", "--repeat: file not found"),
     ("diagnose", "--sections", "0", "--sections must be 1..40"),
     ("diagnose", "--cache", "/dev/null/x", "--cache: /dev/null is not a directory"),
     ("diagnose", "--model-out", "/dev/null/x.s2p", "--model-out: /dev/null is not a directory"),
@@ -256,7 +257,7 @@ def test_every_command_has_a_bad_value_row():
     for command, parser in sub.choices.items():
         options = {s for a in parser._actions for s in a.option_strings if s.startswith("--")}
         options -= {"--help", "--json", "--quick", "--no-noise", "--with-source", "--diagnose", "--quiet", "--no-cache",
-                    "--ssp"}  # flags; --ssp without --with-source: tests/fmi/test_ssp.py
+                    "--ssp", "--no-model"}  # flags; --ssp without --with-source: tests/fmi/test_ssp.py
         tried = {o for c, o, _, _ in _BAD_OPTIONS if c == command}
         assert options <= tried, (command, sorted(options - tried))
 

@@ -191,7 +191,8 @@ def test_cli_json_and_report(tmp_path, fingerprint):
     for c in obj["candidates"]:
         assert set(c) >= {"cause", "section", "gain", "dBIC"} and c["gain"] > 0
     assert "NaN" not in lines[0] and "Infinity" not in lines[0]
-    for name in ("report.md", "response.png", "winding.png"):
+    assert obj["standard_indices"]["dlt911"]["verdict"] == "severe"
+    for name in ("report.md", "fra.png", "response.png", "winding.png"):
         assert (rep / name).is_file()
 
 

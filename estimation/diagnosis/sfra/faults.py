@@ -131,6 +131,10 @@ class Candidate:
         BIC improvement over the unchanged reference model (positive = better).
     model : WindingModel
         The changed model.
+    position_std : float or None
+        Standard deviation of the fitted loop position in sections (shorted turns only): from the
+        Jacobian at the optimum, ``cov = (J^T J)^-1 cost / (n - p)`` (the residuals are weighted, the
+        factor scales them to the misfit actually left).
     """
 
     cause: str
@@ -140,6 +144,7 @@ class Candidate:
     gain: float
     dbic: float
     model: WindingModel = field(repr=False, default=None)
+    position_std: float | None = None
 
     def as_json(self) -> dict:
         """Candidate row for the JSON output."""
@@ -173,16 +178,21 @@ class SfraDiagnosis:
         return self.best.model if (self.best is not None and self.cause != "none") else self.fingerprint.model
 
     def location(self) -> dict | None:
-        """``{"section", "fraction", "of_sections"}`` of the named cause.
+        """``{"section", "fraction", "fraction_std", "of_sections"}`` of the named cause.
 
         ``fraction`` is the fitted loop position over ``N`` for shorted turns,
         else the section's centre ``(k - 0.5) / N``, from the port-1 end.
+        ``fraction_std`` is its standard deviation: from the fit's Jacobian
+        for shorted turns, ``1 / (N sqrt(12))`` (uniform over the section)
+        for the causes placed by section only.
         """
         if self.cause == "none" or self.best is None:
             return None
         n = self.fingerprint.n_sections
         pos = self.best.params.get("position_sections", self.best.section - 0.5)
-        return {"section": self.best.section, "fraction": float(np.clip(pos / n, 0.0, 1.0)), "of_sections": n}
+        std = self.best.position_std if self.best.position_std is not None else 1.0 / np.sqrt(12.0)
+        return {"section": self.best.section, "fraction": float(np.clip(pos / n, 0.0, 1.0)),
+                "fraction_std": float(std / n), "of_sections": n}
 
     def severity(self) -> dict | None:
         """Severity of the named cause (shorted fraction and fault resistance for shorted turns)."""
@@ -200,6 +210,7 @@ class SfraDiagnosis:
         return {
             "cause": self.cause,
             "location": (self.location() or {}).get("fraction"),
+            "location_std": (self.location() or {}).get("fraction_std"),
             "section": (self.location() or {}).get("section"),
             "severity": self.severity(),
             "gain": round(self.gain, 6),
@@ -292,6 +303,37 @@ _FACTORIES = {"shorted-turns": _shorted, "radial-deformation": _radial, "axial-d
 _ALL_STARTS = {"shorted-turns": 3, "radial-deformation": 1, "axial-displacement": 1}
 
 
+def _position_std(jac: np.ndarray, fun: np.ndarray, active: np.ndarray, n_freq: int) -> float | None:
+    """Standard deviation of the loop position (parameter 3 of a short, in sections) from the Jacobian.
+
+    ``cov = (J^T J)^-1 s^2 n / n_eff``: ``s^2 = sum r^2 / (n - p)`` scales the weighted residuals ``r`` to
+    the misfit actually left, and ``n / n_eff`` counts the residuals' correlation along the sweep (a model
+    misfit is smooth in frequency, not white): ``n_eff`` is the sum over the residual series (real and
+    imaginary part of each response) of Bartlett's number of independent points.  A parameter the fit left
+    on a bound (``active``: scipy's ``active_mask``) is held there: its column is dropped.  The variance is
+    then combined with the section's own, ``1/12`` (a position uniform over the section the fit keeps it in):
+    ``1 / (1 / v + 12)``.
+    """
+    from estimation.diagnosis.sfra.repeatability import effective_points
+
+    j = np.asarray(jac, dtype=float)
+    r = np.asarray(fun, dtype=float)
+    n, p = r.size, (j.shape[1] if j.ndim == 2 else 0)
+    if p < 3 or j.shape[0] != n or n % n_freq or not (np.all(np.isfinite(j)) and np.all(np.isfinite(r))):
+        return None
+    series = r.reshape(2, n_freq, -1).transpose(0, 2, 1).reshape(-1, n_freq)  # [re, im] x response, along f
+    n_eff = sum(effective_points(x) for x in series)
+    keep = [i for i in range(p) if i == 2 or not np.asarray(active)[i]]
+    jk = j[:, keep]
+    cov = np.linalg.pinv(jk.T @ jk) * float(r @ r) / max(1, n - len(keep)) * n / max(n_eff, 1.0)
+    v = float(cov[keep.index(2), keep.index(2)])
+    if not (np.isfinite(v) and v >= 0):
+        return None
+    # the fit keeps the loop inside its section: a uniform position there (variance 1/12 section^2) is the
+    # prior, which bounds the variance where the position trades off against the coupling (near the ends)
+    return float(np.sqrt(1.0 / (1.0 / max(v, 1e-300) + 12.0)))
+
+
 def _log(msg: str, progress: bool) -> None:
     if progress:
         print(f"[sfra] {msg}", file=sys.stderr, flush=True)
@@ -359,19 +401,19 @@ def _diagnose(fp: Fingerprint, reference: Sweep, measured: Sweep, progress: bool
             build, starts, bounds, describe = _FACTORIES[cause](base, k)
             fits = []
             for i, s in enumerate(starts):
-                if i >= _ALL_STARTS.get(cause, len(starts)) and min(c for c, _ in fits) < c0:
+                if i >= _ALL_STARTS.get(cause, len(starts)) and min(t[0] for t in fits) < c0:
                     break  # the remaining starts are retries of a failed fit
                 x0 = np.clip(np.asarray(s, dtype=float), np.asarray(bounds[0]) + 1e-9, np.asarray(bounds[1]) - 1e-9)
                 with np.errstate(all="ignore"):
                     sol = least_squares(lambda p: residuals(build(p)), x0, bounds=bounds, max_nfev=max_nfev)
                 cost = float(np.sum(sol.fun**2))
-                fits.append((cost if np.isfinite(cost) else np.inf, sol.x))
-            cost, x = min(fits, key=lambda t: t[0])
+                fits.append((cost if np.isfinite(cost) else np.inf, sol.x, sol.jac, sol.fun, sol.active_mask))
+            cost, x, jac, fun, active = min(fits, key=lambda t: t[0])
             rows.append(cost)
             if not (np.isfinite(cost) and cost < c0):
                 continue  # failed fit: not a candidate
             cand = Candidate(cause, k + 1, describe(x), cost, 1.0 - cost / c0, bic0 - bic(cost, n_r, len(x)),
-                             build(x))
+                             build(x), _position_std(jac, fun, active, f.size) if cause == "shorted-turns" else None)
             if best is None or cand.cost < best.cost:
                 best = cand
         by_section[cause] = [max(0.0, 1.0 - c / c0) if np.isfinite(c) else 0.0 for c in rows]

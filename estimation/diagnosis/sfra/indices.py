@@ -1,15 +1,20 @@
-"""Standard SFRA comparison indices per frequency band.
+"""Comparison indices per frequency band: CC, ASLE and SD (the literature's, not DL/T 911's).
 
 The indices compare the magnitude in dB, ``X = 20 log10 |H_ref|`` and
-``Y = 20 log10 |H_new|``, of the end-to-end response (here the end-to-end
-admittance ``-Y21``, i.e. ``|S21|`` up to the port terminations) over the
-``N`` points of a band:
+``Y = 20 log10 |H_new|``, of one response of the two sweeps (the caller says
+which: the end-to-end admittance ``-Y21`` of a two-port sweep, or the voltage
+ratio of an instrument's CSV export) over the ``N`` points of a band:
 
-* correlation coefficient ``CC = sum(X Y) / sqrt(sum(X^2) sum(Y^2))``
-  (the uncentred form of the Chinese standard DL/T 911-2004 and of the
-  CIGRE TB 342 guide; 1 = identical shapes);
-* absolute sum of logarithmic error ``ASLE = sum |Y - X| / N`` in dB;
-* standard deviation ``SD = sqrt(sum (Y - X)^2 / (N - 1))`` in dB.
+* correlation coefficient ``CC = sum(X Y) / sqrt(sum(X^2) sum(Y^2))``,
+  **uncentred** (no means subtracted; a common offset in dB raises it, so it
+  is close to 1 for most pairs of SFRA curves; Ryder 2003, Secue and Mombello
+  2008).  It is not the factor of DL/T 911, which is centred (the Pearson
+  coefficient) and mapped to ``R = -lg(1 - LR)``: :mod:`estimation.diagnosis.sfra.dlt911`;
+* absolute sum of logarithmic error ``ASLE = sum |Y - X| / N`` in dB,
+  **uncentred** (offsets count);
+* standard deviation ``SD = sqrt(sum (Y - X)^2 / (N - 1))`` in dB,
+  **uncentred** (the root-mean-square difference about zero, not about its
+  mean, with the ``N - 1`` of the literature).
 
 References: J. R. Secue and E. E. Mombello, "Sweep frequency response
 analysis (SFRA) for the assessment of winding displacements and
@@ -27,7 +32,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BANDS", "band_indices", "comparison_indices"]
+__all__ = ["BANDS", "DEFINITIONS", "band_indices", "comparison_indices"]
+
+#: The indices' formulas and centring, as written into the JSON answer.
+DEFINITIONS = {
+    "cc": {"formula": "sum(X*Y) / sqrt(sum(X^2) * sum(Y^2))", "centred": False,
+           "note": "uncentred correlation (not the DL/T 911 factor, which is centred: standard_indices.dlt911)"},
+    "asle": {"formula": "sum(|Y - X|) / N", "unit": "dB", "centred": False},
+    "sd": {"formula": "sqrt(sum((Y - X)^2) / (N - 1))", "unit": "dB", "centred": False},
+    "X, Y": "20 log10 |H| of the reference and the new sweep on the band's N points",
+}
 
 #: (name, low Hz, high Hz) of the reporting bands.
 BANDS = (

@@ -79,30 +79,39 @@ def _winding_figure(diag: SfraDiagnosis, path: Path) -> None:
         ax.text(0.9, y + 0.5, text, va="center", fontsize=8)
     if loc is not None:
         y = n * (1.0 - loc["fraction"])  # the fitted position along the winding
+        s = n * loc.get("fraction_std", 0.0)
+        ax.axhspan(max(0.0, y - 2 * s), min(float(n), y + 2 * s), xmin=0.12, xmax=0.4, color="tab:blue", alpha=0.25,
+                   lw=0)
+        ax.errorbar([0.0], [y], yerr=[[min(2 * s, y)], [min(2 * s, n - y)]], fmt="none", ecolor="tab:blue",
+                    capsize=4, lw=1.5)
         ax.plot([0.1, 0.9], [y, y], color="k", lw=2)
-        ax.text(0.05, y, f"{loc['fraction']:.2f}", ha="right", va="center", fontsize=7)
     ax.text(0.5, n + 0.15, "port 1", ha="center", va="bottom", fontsize=9)
     ax.text(0.5, -0.15, "port 2", ha="center", va="top", fontsize=9)
     ax.set_xlim(-0.3, 2.2)
     ax.set_ylim(-0.8, n + 0.8)
     ax.axis("off")
-    ax.set_title(diag.cause if hit is None else f"{diag.cause}: section {hit}/{n}", fontsize=9)
+    title = diag.cause if hit is None else f"{diag.cause}: section {hit}/{n}"
+    if loc is not None:
+        title += f"\nposition {loc['fraction']:.3f} ± {loc.get('fraction_std', 0.0):.3f}\n(1 std; bar: ± 2 std)"
+    ax.set_title(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
 
-def write_report(diag: SfraDiagnosis, out: dict, directory: str | os.PathLike) -> Path:
-    """Write ``report.md``, ``response.png`` and ``winding.png`` into ``directory``.
+def write_report(diag: SfraDiagnosis, out: dict, directory: str | os.PathLike, repeat=None) -> Path:
+    """Write ``report.md``, ``fra.png``, ``response.png`` and ``winding.png`` into ``directory``.
 
     Parameters
     ----------
     diag : SfraDiagnosis
         The diagnosis.
     out : dict
-        Its JSON object (with the indices).
+        Its JSON object (with the indices, the DL/T 911 factors and the repeatability).
     directory : str or os.PathLike
         Created if missing.
+    repeat : estimation.diagnosis.sfra.compare.FraTrace, optional
+        The second healthy sweep, drawn in ``fra.png``.
 
     Returns
     -------
@@ -111,6 +120,12 @@ def write_report(diag: SfraDiagnosis, out: dict, directory: str | os.PathLike) -
     """
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
+    from estimation.diagnosis.sfra.compare import FraTrace
+    from estimation.diagnosis.sfra.report_fra import fra_figure, fra_markdown
+
+    ref = FraTrace(diag.reference.frequency_hz, diag.reference.voltage_ratio, diag.reference.source)
+    new = FraTrace(diag.measured.frequency_hz, diag.measured.voltage_ratio, diag.measured.source)
+    fra_figure(d / "fra.png", ref, new, repeat, (out.get("standard_indices") or {}).get("dlt911"))
     _response_figure(diag, d / "response.png")
     _winding_figure(diag, d / "winding.png")
     fp = diag.fingerprint
@@ -127,7 +142,8 @@ def write_report(diag: SfraDiagnosis, out: dict, directory: str | os.PathLike) -
     ]
     if out.get("location") is not None:
         lines.append(f"Location: section {out['section']} of {fp.n_sections}, "
-                     f"{out['location']:.3f} of the winding from the port-1 end.")
+                     f"{out['location']:.3f} ± {out.get('location_std') or 0.0:.3f} (one standard deviation) of the "
+                     "winding from the port-1 end.")
     if out.get("severity"):
         sev = {k: v for k, v in out["severity"].items() if v is not None}
         lines.append("Severity: " + ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}"
@@ -135,14 +151,9 @@ def write_report(diag: SfraDiagnosis, out: dict, directory: str | os.PathLike) -
     lines += ["", "| candidate | section | gain | dBIC |", "|---|---|---|---|"]
     for c in out["candidates"]:
         lines.append(f"| {c['cause']} | {c['section']} | {c['gain']:.3f} | {c['dBIC']:.1f} |")
-    lines += ["", "Comparison indices of the end-to-end magnitude (dB), new sweep against reference:", "",
-              "| band | points | CC | ASLE (dB) | SD (dB) |", "|---|---|---|---|---|"]
-    for band, v in out["indices"].items():
-        def fmt(x, spec):
-            return "-" if x is None else format(x, spec)
-        lines.append(f"| {band} | {v['points']} | {fmt(v['cc'], '.4f')} | {fmt(v['asle'], '.3f')} | "
-                     f"{fmt(v['sd'], '.3f')} |")
-    lines += ["", "![end-to-end response](response.png)", "", "![winding](winding.png)", ""]
+    lines += [""] + fra_markdown(out)
+    lines += ["", "![FRA traces, DL/T 911 bands, difference](fra.png)", "",
+              "![end-to-end response and models](response.png)", "", "![winding](winding.png)", ""]
     path = d / "report.md"
     path.write_text("\n".join(lines))
     return path

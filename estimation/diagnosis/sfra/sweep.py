@@ -76,6 +76,10 @@ class Sweep:
         File the sweep came from.
     digest : str
         SHA-256 of the file's bytes (empty for sweeps built in memory).
+    forward : numpy.ndarray or None
+        The voltage ratio ``V_resp / V_ref`` an FRA instrument records driving port 1 with port 2 on its
+        50 Ohm input, ``-Y21 / (Y22 + 1/50 S)`` from the unsymmetrised ``Y21`` (= ``S21 / (1 + S11)`` of a
+        50 Ohm file), shape ``(F,)``; ``None`` when built from the symmetrised ``(F, 3)`` form.
     """
 
     frequency_hz: np.ndarray
@@ -83,6 +87,14 @@ class Sweep:
     noise: np.ndarray
     source: str = ""
     digest: str = ""
+    forward: np.ndarray | None = None
+
+    @property
+    def voltage_ratio(self) -> np.ndarray:
+        """``V_resp / V_ref`` (dimensionless, shape ``(F,)``): :attr:`forward`, else from the symmetrised ``Y``."""
+        from estimation.diagnosis.sfra.dlt911 import voltage_ratio
+
+        return self.forward if self.forward is not None else voltage_ratio(self.y[:, 1], self.y[:, 2])
 
     @property
     def z_end_to_end(self) -> np.ndarray:
@@ -92,11 +104,15 @@ class Sweep:
     @classmethod
     def from_y(cls, f: np.ndarray, y: np.ndarray, source: str = "", digest: str = "") -> "Sweep":
         """Build from a ``(F, 2, 2)`` or ``(F, 3)`` admittance array (noise estimated)."""
+        from estimation.diagnosis.sfra.dlt911 import voltage_ratio
+
         y = np.asarray(y, dtype=complex)
+        forward = None
         if y.ndim == 3:
+            forward = voltage_ratio(y[:, 1, 0], y[:, 1, 1])  # the forward direction, as measured
             y = np.stack([y[:, 0, 0], 0.5 * (y[:, 1, 0] + y[:, 0, 1]), y[:, 1, 1]], axis=1)
         noise = np.stack([estimate_noise(y[:, i]) for i in range(3)], axis=1)
-        return cls(np.asarray(f, dtype=float), y, noise, source, digest)
+        return cls(np.asarray(f, dtype=float), y, noise, source, digest, forward)
 
 
 def load_sweep(path: str | os.PathLike) -> Sweep:
