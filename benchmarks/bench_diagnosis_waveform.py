@@ -7,21 +7,78 @@ random per case (``series-resistance``, ``component-drift``,
 values diagnosed with the nominal ones. Prints the confusion matrix (true
 cause x named cause), per-case gain and wall time.
 
+With ``--recorded``: the arrangement's exact replay on the recorded PRIS
+cases of ``tests/data/pris_records`` (the source on a 15 Ohm load: a series
+resistance, drifted L and C, nothing, switch ringing; the three-section
+winding: nothing, 330 pF across the port), diagnosed by
+:func:`estimation.diagnosis.waveform.replay.diagnose_pris_record`; per case
+the truth, the causes named, the fitted source values, the wall time and the
+process's CPU time.
+
 Usage::
 
     python benchmarks/bench_diagnosis_waveform.py [--per-cause 6] [--seed0 100] [--json FILE]
+    python benchmarks/bench_diagnosis_waveform.py --recorded [NAME ...]
 """
 
 from __future__ import annotations
 
 import argparse
+import gzip
+import io
 import json
 import statistics
 import sys
 import time
+from pathlib import Path
+
+import numpy as np
 
 from estimation.diagnosis.waveform.source import diagnose_waveforms
 from estimation.diagnosis.waveform.synthetic import WAVEFORM_CASE_CAUSES, thesis_case, waveform_case
+from pris_cosim.circuits.netlist import read_netlist
+from pris_cosim.measured.formats import Waveforms
+from pris_cosim.models.builtin import get_model
+
+DATA = Path(__file__).resolve().parent.parent / "tests" / "data" / "pris_records"
+CASES = [  # name, baseline, source (R, L, C), truth
+    ("source_series_r", "load", (57.1, 1e-3, 4e-6), ["series-resistance"]),
+    ("source_drift", "load", (57.1, 1e-3, 4e-6), ["component-drift"]),
+    ("source_none", "load", (57.1, 1e-3, 4e-6), []),
+    ("source_ringing", "load", (57.1, 1e-3, 4e-6), ["series-resistance", "switch-ringing"]),
+    ("three_section_ngspice_10MHz", "three-section", (150.0, 4e-3, 1e-6), []),
+    ("three_section_stray_10MHz", "three-section", (150.0, 4e-3, 1e-6), ["stray-capacitance"]),
+]
+
+
+def recorded(only: list[str]) -> int:
+    """The recorded PRIS cases replayed from their bridge voltage; one line each, then the count right."""
+    from estimation.diagnosis.waveform.replay import diagnose_pris_record
+
+    args_only = only
+    todo = [c for c in CASES if not args_only or c[0] in args_only]
+    if not todo:
+        print(f"no case named {' '.join(args_only)} (cases: {', '.join(c[0] for c in CASES)})", file=sys.stderr)
+        return 2
+    right = 0
+    for name, base, (r, l, c), truth in todo:
+        with gzip.open(DATA / f"{name}.csv.gz", "rt") as fh:
+            a = np.loadtxt(io.StringIO(fh.read()), delimiter=",", skiprows=1)
+        w = Waveforms(a[:, 0], a[:, 1], a[:, 2], a[:, 3])
+        kw = (dict(model=get_model(base)) if base != "load"
+              else dict(circuit=read_netlist(DATA / "ho_load15.cir"), port="p"))
+        t0, c0 = time.perf_counter(), time.process_time()
+        d = diagnose_pris_record(w, r, l, c, progress=False, **kw)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        ok = sorted(d.causes) == sorted(truth)
+        right += ok
+        src = d.as_json()["source_values"]
+        print(f"{'ok' if ok else 'NO'} {name:30s} truth {truth or ['none']} said {d.causes or ['none']} "
+              f"R {src['rpris']:.4g} L {src['lpris']:.4g} C {src['cpris']:.4g} | {w.n_samples} samples, "
+              f"wall {wall:.1f} s, cpu {cpu:.1f} s", flush=True)
+    print(f"{right}/{len(todo)} right")
+    return 0
+
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -30,7 +87,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed0", type=int, default=100, help="first seed")
     ap.add_argument("--noise", type=float, default=0.003, help="relative noise (default 0.003)")
     ap.add_argument("--json", help="write the per-case rows to this file")
+    ap.add_argument("--recorded", nargs="*", metavar="NAME",
+                    help="the recorded PRIS cases replayed from the bridge voltage instead (all, or the ones named)")
     args = ap.parse_args(argv)
+    if args.recorded is not None:
+        return recorded(args.recorded)
     rows = []
     jobs = [(c, args.seed0 + i) for i in range(args.per_cause) for c in WAVEFORM_CASE_CAUSES]
     jobs.append(("thesis", 0))

@@ -30,6 +30,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--lpris", type=si_value, help="nominal source inductance, H (waveform data; 4m, 0.004 ...)")
     p.add_argument("--cpris", type=si_value, help="nominal source capacitance, F (waveform data; 1u, 1e-6 ...)")
     p.add_argument("--rload", type=si_value, help="load resistance if known, Ohm (waveform data)")
+    p.add_argument("--source-tolerance", type=_tolerance, default=0.01, metavar="REL",
+                   help="how far the source's nominal --rpris --lpris --cpris may be from the truth, relative "
+                   "(default 0.01, the instrument's own; waveform data replayed from the bridge voltage: a source "
+                   "value moved beyond it is named as a source cause)")
     p.add_argument("--report", metavar="DIR", help="write report.md with plots into DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     sf = p.add_argument_group("SFRA (a new sweep against a healthy fingerprint)")
@@ -96,7 +100,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if getattr(args, "no_model", False):
         raise DiagnosisError("--no-model needs --reference")
     data = load_measured(args.measured, segment=args.segment)
-    if isinstance(data, Waveforms) and (args.model or args.netlist):
+    source_given = None not in (args.rpris, args.lpris, args.cpris)
+    if isinstance(data, Waveforms) and source_given and (args.model or args.netlist or args.rload):
+        # the whole arrangement replayed from the bridge voltage: source and winding (or known load) causes
+        from estimation.diagnosis.waveform.command import diagnose_record
+
+        diag = diagnose_record(data, args)
+    elif isinstance(data, Waveforms) and (args.model or args.netlist):
         # a PRIS record of a winding: its input impedance diagnosed against the winding's design
         from pris_cosim.models.builtin import get_model
         from pris_cosim.circuits.netlist import read_netlist
@@ -110,6 +120,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             raise DiagnosisError("a netlist baseline needs --port")
         diag = diagnose_winding_waveforms(data, model=model, circuit=circuit, port=args.port,
                                           tolerance=args.tolerance)
+        diag.evidence["path"] = {"path": "h1", "why": "the source's nominal values (--rpris --lpris --cpris) "
+                                 "not given: the winding's impedance from the H1 of v_in / i_in"}
         if args.report:
             write_report(diag, args.report, source=Path(args.measured).name + " (impedance from the PRIS record)")
     elif isinstance(data, Waveforms):
@@ -138,6 +150,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         if args.report:
             write_report(diag, args.report, source=Path(args.measured).name + (f" [{args.segment}]" if args.segment else ""))
     out = diag.as_json()
+    if "path" not in out and isinstance(diag.evidence.get("path"), dict):
+        out["path"] = diag.evidence["path"]  # which path a waveform record took, and why
     if isinstance(out.get("realisation"), dict):
         out["realisation"] = {k: v for k, v in out["realisation"].items() if k != "circuit"}
     if args.report:
@@ -146,6 +160,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         _emit(_plain(out))
     else:
         print(f"cause: {out['cause']}  gain: {out['gain']:.3f}")
+        path = out.get("path")
+        if isinstance(path, dict):
+            print(f"path: {path.get('path')} ({path.get('why')})")
         if out.get("causes") and len(out["causes"]) > 1:
             print(f"causes: {' + '.join(out['causes'])}")
         for d in out.get("drift") or []:

@@ -17,8 +17,10 @@ clock are left out, one bin per log-spaced band is kept (:func:`band_pick`, gaps
 left as gaps) and diagnosed against the
 netlist or the built-in model by
 :func:`.diagnose.diagnose_frequency`: the same catalogue, the same design
-prior, the same keys. The source's own causes (:mod:`.waveform`) need the
-source model and a resistive load; they are not part of this path.
+prior, the same keys. The source's own causes are not part of this path: with
+the source's nominal values and a record whose bridge voltage repeats, the
+whole arrangement is replayed instead (:mod:`.replay`), and this path is the
+fallback when it cannot be (the answer's ``path`` says which).
 """
 
 from __future__ import annotations
