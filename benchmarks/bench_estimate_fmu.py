@@ -22,6 +22,14 @@ by an earlier run instead of running it again (ours always runs). Printed and wr
 per-parameter errors, FMU runs (ours also in whole-record equivalents), wall times, ours beside theirs,
 the ratio of runs and whether ours is within 2 % where theirs is not with at most a tenth of their runs.
 
+A four-section winding FMU built here: ``python benchmarks/bench_estimate_fmu.py --four [--fmi3]
+[--four-noise 0,0.005]`` builds the four-section FMU of ``tests/foreign_fmus.py`` with pythonfmu (or
+pythonfmu3: FMI 3.0), records it with fmpy (a PRBS of order 9 at 200 kHz sampled at 4 MHz, two periods:
+20,440 samples; current ``i_drive`` in, ``v_1`` and ``v_4`` out) and estimates nine values: ``L1`` ..
+``L4``, a shared ``Cs`` and ``Cg`` through ``ties``, ``k12``, ``k23``, ``k34`` (bounds a third to three
+times the truth; the couplings clipped below 1), as a ``pris-cosim estimate`` subprocess on two workers.
+Printed per record: errors, FMU runs (whole-record equivalents), wall time, the verdict.
+
 For every case the prebuilt arrangement FMU (``fmus/*/..._pris.fmu``) makes
 a 1 MHz record with fmpy's ``simulate_fmu`` (two-section: 50 ms, the peers'
 comparison record; three-section: 10 ms). Printed:
@@ -44,6 +52,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -159,7 +168,8 @@ def ladder_estimate(a: argparse.Namespace, d: Path, rec: str, truth: dict[str, f
           f"(process {wall:.1f} s, exit {p.returncode}), converged {res['converged']}")
     print(f"   verdict: {res['convergence_reason']}; non-identifiable: {res['non_identifiable'] or 'none'}")
     for k, e in res["errors_percent"].items():
-        print(f"     {k:>5} {res['estimate'][k]:12.5g}  {e:+10.4f} %  (1-sigma {100 * res['uncertainty'][k]:.2g} %)")
+        sd = (res["uncertainty"] or (res.get("local_curvature") or {}).get("values", {})).get(k, float("nan"))
+        print(f"     {k:>5} {res['estimate'][k]:12.5g}  {e:+10.4f} %  (1-sigma {100 * sd:.2g} %)")
     for r in res["restarts"]:
         stages = ", ".join(f"{s['stage']}: {s['runs']}" for s in r.get("runs_per_stage") or [])
         print(f"   restart {r['restart']}: cost {r['cost']:.3g}, {r['simulations']} runs ({stages})")
@@ -308,7 +318,8 @@ def ladder(a: argparse.Namespace, out: Path) -> int:
         rows.append([rec, scores["zoh"], scores["linear"], res["input_hold"].split(" ")[0], worst,
                      res["fmu_simulations"], round(res["fmu_record_equivalents"], 1), round(res["wall_s"], 1),
                      str(res["converged"]), ", ".join(res["non_identifiable"]) or "none"])
-        errs_rows += [[rec, k, truth[k], res["estimate"][k], e, 100 * res["uncertainty"][k]]
+        errs_rows += [[rec, k, truth[k], res["estimate"][k], e,
+                       100 * (res["uncertainty"] or (res.get("local_curvature") or {}).get("values", {})).get(k, float("nan"))]
                       for k, e in res["errors_percent"].items()]
         summary[rec] = {"worst_percent": worst, "errors_percent": res["errors_percent"],
                         "fmu_simulations": res["fmu_simulations"], "wall_s": res["wall_s"],
@@ -322,6 +333,68 @@ def ladder(a: argparse.Namespace, out: Path) -> int:
               errs_rows)],
         summary="pris-cosim estimate with a foreign (pythonfmu) FMU in the loop: a three-section ladder, "
                 "noise-free and 0.5 % noise records; wall times on a shared, loaded 2-core machine")
+    return 0
+
+
+FOUR_FREE = ("L1", "L2", "L3", "L4", "Cs", "Cg", "k12", "k23", "k34")
+
+
+def four(a: argparse.Namespace, out: Path) -> int:
+    """The four-section, nine-value case (module docstring)."""
+    import subprocess
+
+    sys.path.insert(0, str(REPO / "tests"))
+    import foreign_fmus as ff
+
+    name = "four_section_fmi3" if a.fmi3 else "four_section"
+    m = ff.MODELS[name]
+    t0 = time.perf_counter()
+    fmu = ff.build(name, out / name)
+    print(f"== four sections ({'FMI 3.0, pythonfmu3' if a.fmi3 else 'FMI 2.0, pythonfmu'}): built in "
+          f"{time.perf_counter() - t0:.1f} s")
+    summary = {}
+    for noise in [float(x) for x in a.four_noise.split(",")]:
+        t1 = time.perf_counter()
+        rec = ff.record(name, fmu, out / f"{name}-{noise:g}.csv", fs=4e6, n=20440, hold=20, noise=noise)
+        truth = m["truth"]
+        cfg = {"fmu": str(fmu), "input": m["input"], "output": m["outputs"][0], "outputs": m["outputs"][1:],
+               "parameters": {k: {"min": truth[k] / 3, "max": truth[k] * 3} for k in FOUR_FREE},
+               "ties": m["ties"], "values": {k: v for k, v in truth.items() if k not in FOUR_FREE},
+               "target": {"kind": "waveforms-csv", "path": str(rec), "values": truth}, "seed": 1}
+        path = out / f"{name}-{noise:g}.json"
+        path.write_text(json.dumps(cfg, indent=1))
+        print(f"   record: 20,440 samples, noise {100 * noise:g} % ({time.perf_counter() - t1:.1f} s)", flush=True)
+        cmd = [sys.executable, "-m", "pris_cosim", "estimate", "--config", str(path), "--json",
+               "--out", str(out / f"{name}-{noise:g}-run"), "--workers", str(a.workers or 2)]
+        import resource
+
+        t2 = time.perf_counter()
+        c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        p = subprocess.run(cmd, cwd=REPO, stdout=subprocess.PIPE, text=True)
+        wall = time.perf_counter() - t2
+        c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime)  # the estimate and its reaped workers
+        line = next((ln for ln in p.stdout.splitlines() if ln.startswith("{")), None)
+        if line is None:
+            print(f"   estimate failed (exit {p.returncode})")
+            continue
+        res = json.loads(line)
+        worst = max(abs(e) for e in res["errors_percent"].values())
+        print(f"   noise {100 * noise:g} %: worst error {worst:.3g} %, {res['fmu_simulations']} FMU runs "
+              f"({res['fmu_record_equivalents']:.0f} whole-record equivalents, {res['failed_evaluations']} failed), "
+              f"wall {wall:.0f} s (CPU {cpu:.0f} s; load average {os.getloadavg()[0]:.1f}), "
+              f"converged {res['converged']}: {res['convergence_reason']}")
+        for k, e in res["errors_percent"].items():
+            print(f"     {k:>4} {res['estimate'][k]:12.5g}  {e:+10.4f} %")
+        for f in res.get("failed_runs", []):
+            print(f"     failed: {f}")
+        summary[f"noise-{noise:g}"] = {"errors_percent": res["errors_percent"], "worst_percent": worst,
+                                       "fmu_simulations": res["fmu_simulations"],
+                                       "fmu_record_equivalents": res["fmu_record_equivalents"], "wall_s": wall,
+                                       "cpu_s": cpu,
+                                       "converged": res["converged"], "reason": res["convergence_reason"],
+                                       "failed_runs": res.get("failed_runs", [])}
+    (out / f"{name}-summary.json").write_text(json.dumps(summary, indent=1))
     return 0
 
 
@@ -342,6 +415,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--probes", action="store_true", help="also compare the internal node voltages (v_mid; v_n2, v_n3)")
     p.add_argument("--ladder", metavar="DIR", help="estimate the foreign ladder FMU in DIR (see the docstring)")
     p.add_argument("--records", default="record.csv,record_noisy.csv", help="ladder records to estimate")
+    p.add_argument("--four", action="store_true", help="the four-section, nine-value case (see the docstring)")
+    p.add_argument("--fmi3", action="store_true", help="--four: the FMI 3.0 build (pythonfmu3)")
+    p.add_argument("--four-noise", default="0", help="--four: noise levels of the records, e.g. 0,0.005")
     p.add_argument("--peers", action="store_true",
                    help="with --ladder: also run estim8 on the same FMU and records (throwaway environment)")
     p.add_argument("--peer-venv", metavar="PATH", help="the peer's virtual environment (default: a new temp dir)")
@@ -360,6 +436,8 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if a.ladder:
         return ladder(a, out)
+    if a.four:
+        return four(a, out)
     fs = a.fs
     summary = {}
     for name in a.cases.split(","):
@@ -393,7 +471,8 @@ def main(argv: list[str] | None = None) -> int:
               f"({res['failed_evaluations']} failed; {res['fmu_record_equivalents']:.0f} whole-record equivalents), {res['wall_s']:.1f} s, cost {res['cost']:.3g}, "
               f"converged {res['converged']}" + ("" if res["converged"] else f" ({res['convergence_reason']})"))
         for k, e in res["errors_percent"].items():
-            print(f"     {k:>4} {res['estimate'][k]:12.5g}  {e:+10.4f} %  (1-sigma {100 * res['uncertainty'][k]:.2g} %)")
+            sd = (res["uncertainty"] or (res.get("local_curvature") or {}).get("values", {})).get(k, float("nan"))
+            print(f"     {k:>4} {res['estimate'][k]:12.5g}  {e:+10.4f} %  (1-sigma {100 * sd:.2g} %)")
         summary[tag] = {"truth_scores": scores, "errors_percent": res["errors_percent"], "worst_percent": worst,
                          "fmu_simulations": res["fmu_simulations"],
                         "fmu_record_equivalents": res["fmu_record_equivalents"], "failed_evaluations": res["failed_evaluations"],

@@ -258,6 +258,20 @@ def load_config(path: str | Path) -> dict[str, Any]:
     return cfg
 
 
+def _resolved(cfg: dict[str, Any], base: Path) -> dict[str, Any]:
+    """The config with its relative file paths (``netlist``, ``target.path``) taken from ``base``."""
+    cfg = dict(cfg)
+
+    def fix(p: Any) -> Any:
+        return str(base / p) if isinstance(p, str) and p and not Path(p).is_absolute() else p
+
+    if "netlist" in cfg:
+        cfg["netlist"] = fix(cfg["netlist"])
+    if isinstance(cfg.get("target"), dict) and "path" in cfg["target"]:
+        cfg["target"] = {**cfg["target"], "path": fix(cfg["target"]["path"])}
+    return cfg
+
+
 def _read_record(tgt: dict[str, Any]) -> Any:
     """The waveform record of a ``waveforms-csv`` target (one-line errors naming the file)."""
     from pris_cosim.measured.formats import read_waveform_csv
@@ -334,6 +348,7 @@ def run_estimate(cfg: dict[str, Any], progress: bool = True, out: str | None = N
     for key in ("values", "input_hold"):
         if key in cfg:
             raise EstimationInputError(f"config key {key!r} applies only to a config with 'fmu'")
+    cfg = _resolved(cfg, Path(base))
     from pris_cosim.lab import timedomain as td
     from pris_cosim.circuits.arrangement import SourceSettings
     from pris_cosim.measured.formats import read_response_csv
@@ -609,9 +624,10 @@ def _fit_and_report(cfg: dict[str, Any], approach: Any, params: Any, model: Any,
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
+    # relative paths of a configuration are taken from its own folder
     out = run_estimate(load_config(args.config), progress=not getattr(args, "quiet", False),
                        out=getattr(args, "out", None), scheduler=getattr(args, "scheduler", None),
-                       workers=getattr(args, "workers", None))
+                       workers=getattr(args, "workers", None), base=Path(args.config).resolve().parent)
     if args.json:
         emit(out)
     else:

@@ -19,8 +19,11 @@ supplies the stages; :func:`run_recipe` owns the order and the rules:
    down to the level that explains the data (three times its noise floor, or,
    when the best fit shows the data's noise reading to be signal, the larger
    of 1.5 times the best RMS and three times its residual's own noise,
-   :func:`estimation.verdict.residual_noise`);
-4. **verdict** (:func:`estimation.verdict.verdict`) on the lowest own cost,
+   :func:`estimation.verdict.residual_noise`); a kind with ``explains(r)``
+   (an FMU: :func:`estimation.fmu.verdict.chi_square` against the record's
+   noise read at that end) decides instead which ends explain the data;
+4. **verdict** (:func:`estimation.verdict.verdict`, or the kind's own
+   ``judge(x, ends)``, e.g. :func:`estimation.fmu.verdict.judge`) on the lowest own cost,
    with the other ends telling whether the answer is unique; when the verdict
    finds it short of its minimum, the kind's ``polish`` runs once more.
 
@@ -188,6 +191,15 @@ def run_recipe(kind: ModelKind, restarts: int, max_restarts: int | None = None, 
     rows: list[dict[str, Any]] = []
     points: list[tuple[np.ndarray, float]] = []
     nfev = 0
+    # a kind may judge its ends itself (an FMU: the residual against the record's own noise, a chi-square test)
+    explains = getattr(kind, "explains", None)
+    judge = getattr(kind, "judge", None)
+    consistent: list[bool] = []
+
+    def enough() -> bool:
+        if explains is not None:
+            return sum(consistent) >= 2
+        return sum(p[1] <= reach for p in points) >= 2
 
     def take(batch: list[tuple[int, Start]]) -> None:
         nonlocal reach, nfev
@@ -202,6 +214,8 @@ def run_recipe(kind: ModelKind, restarts: int, max_restarts: int | None = None, 
                                                                                             scale0))
             ends.append(e)
             points.append((np.asarray(e.x, float), rms))
+            if explains is not None:
+                consistent.append(bool(explains(r)))
             rows.append({"restart": k + 1, **s.info, "stage1_cost": float(s.cost), "cost": float(e.cost),
                          "residual_rms": rms, "evaluations": int(sum(e.runs.values())) + 1,
                          "runs_per_stage": dict(e.runs), **e.info})
@@ -222,7 +236,7 @@ def run_recipe(kind: ModelKind, restarts: int, max_restarts: int | None = None, 
         raise ValueError("the model kind gave no start to descend")
     take(first)
     k = len(first)
-    while k < more and sum(p[1] <= reach for p in points) < 2:
+    while k < more and not enough():
         if time_limit_s is not None and time.perf_counter() - t0 > time_limit_s:
             break
         s = kind.start(k)
@@ -233,7 +247,12 @@ def run_recipe(kind: ModelKind, restarts: int, max_restarts: int | None = None, 
     best = min(range(len(ends)), key=lambda j: ends[j].cost)
     best_x, best_c, message = np.asarray(ends[best].x, float), float(ends[best].cost), ends[best].message
     opts = dict(getattr(kind, "verdict_options", {}) or {})
-    v = verdict(kind.residuals, kind.params, best_x, kind.data(), points, noise=noise, **opts)
+    def decide() -> dict[str, Any]:
+        if judge is not None:
+            return judge(best_x, points)
+        return verdict(kind.residuals, kind.params, best_x, kind.data(), points, noise=noise, **opts)
+
+    v = decide()
     if not v["converged"] and "not at a minimum" in v["convergence_reason"] \
             and (time_limit_s is None or time.perf_counter() - t0 < time_limit_s):
         # the best restart stopped short of its minimum (a flat direction): polish it once more
@@ -246,5 +265,5 @@ def run_recipe(kind: ModelKind, restarts: int, max_restarts: int | None = None, 
                 points[best] = (np.asarray(x, float), _rms(kind.residuals(np.asarray(x, float)[None])))
                 best_x, best_c = np.asarray(x, float), float(c)
                 message += f"; final least squares: {note}"
-                v = verdict(kind.residuals, kind.params, best_x, kind.data(), points, noise=noise, **opts)
+                v = decide()
     return Outcome(best_x, best_c, nfev, message, v, points, rows)

@@ -5,8 +5,11 @@ evaluation resets it (``fmi2Reset`` / ``fmi3Reset``), sets the parameters,
 initialises and steps through the record. An FMU that refuses the parameters,
 fails a call, returns NaN or infinite outputs, or diverges (an output beyond
 ``limit``) costs a failed evaluation (``None``, counted in
-:attr:`FmuModel.failures`), never an exception: the instance is freed and a
-fresh one instantiated, so an FMU left in an error state cannot poison later
+:attr:`FmuModel.failures`, by reason in :attr:`FmuModel.failure_reasons`),
+never an exception: the instance is reset (``fmi2Reset``/``fmi3Reset`` are
+allowed in the error state), or, when even that fails, replaced by a fresh one
+(the old one is dropped without ``freeInstance``: some Python FMUs crash the
+host process when freed), so an FMU left in an error state cannot poison later
 runs.
 
 Inputs
@@ -46,6 +49,53 @@ import numpy as np
 __all__ = ["FmuModel", "FmuSetupError", "fmu_variables"]
 
 _LOG: list[str] = []
+_LOG_COUNT = [0]
+
+
+def _errors_only(inst: Any) -> None:
+    """Let an FMI 2.0 instance log its error messages only (the reason of a failed run); logging off when
+    it does not know the standard error categories."""
+    cats = [c for c in ("logStatusError", "logStatusFatal")]
+    try:
+        inst.setDebugLogging(True, cats)
+    except Exception:
+        try:
+            inst.setDebugLogging(False, [])
+        except Exception:
+            pass
+
+
+def _log_mark() -> int:
+    """Position in the FMUs' log messages (FMI 2.0 callback and FMI 3.0 list) before a run."""
+    from pris_cosim.fmi.cosim import _MESSAGES
+
+    return (_MESSAGES[-1][0] + 1 if _MESSAGES else 0) * 1_000_000 + _LOG_COUNT[0] % 1_000_000
+
+
+def _log_since(mark: int) -> str:
+    """The last error message an FMU logged since ``mark`` (status error or fatal), or ''."""
+    from pris_cosim.fmi.cosim import _MESSAGES
+
+    first, n3 = divmod(mark, 1_000_000)
+    texts = [t for num, _, st, t in _MESSAGES if num >= first and st >= 3 and t.strip()]
+    new = (_LOG_COUNT[0] - n3) % 1_000_000
+    texts += [t for t in (_LOG[-new:] if new else []) if t.startswith(("[3]", "[4]"))]
+    if not texts:
+        return ""
+    lines = [ln.strip() for ln in texts[-1].splitlines() if ln.strip()]
+    # a Python FMU logs its traceback: the last line names the exception
+    return lines[-1] if lines else ""
+
+
+def _reason_key(text: str) -> str:
+    """A failure's reason with its instance-specific numbers removed (runs group by it)."""
+    import re
+
+    text = re.sub(r"^\[\d\]\s*", "", str(text).strip()) or "failed"
+    text = re.sub(r"^([A-Za-z_]\w*)\(['\"](.*)['\"]\)$", r"\1: \2", text)  # ValueError('...') -> ValueError: ...
+    text = re.sub(r"t = [-+0-9.eE]+ s", "t = ... s", text)
+    text = re.sub(r"\s+at\s+[A-Za-z_]\w*=[-+0-9.].*$", "", text)  # "... at k12=0.97, ...": values added later
+    return text[:200]
 
 
 class FmuSetupError(ValueError):
@@ -56,6 +106,7 @@ def _fmi3_log(env: Any, status: int, category: Any, message: Any) -> None:
     """FMI 3.0 log callback: messages kept (the last 200), not printed."""
     text = message.decode("utf-8", "replace") if message else ""
     _LOG.append(f"[{int(status)}] {text}")
+    _LOG_COUNT[0] += 1
     del _LOG[:-200]
 
 
@@ -142,10 +193,13 @@ class FmuModel:
         self._vr_in = [self.variables[input].valueReference] if input else []
         self._tmp = extract(str(self.path))
         self.instance: Any = None
+        self._dropped: list[Any] = []
         self.simulations = 0
         self.samples = 0
         self.failures = 0
         self.last_error = ""
+        #: Failed runs by reason: {reason: {"runs": count, "at": parameter values of the first such run}}.
+        self.failure_reasons: dict[str, dict[str, Any]] = {}
         self._used = False
         self._instantiate()
 
@@ -164,7 +218,8 @@ class FmuModel:
 
             inst = FMU2Slave(guid=self.md.guid, unzipDirectory=self._tmp, modelIdentifier=ident,
                              instanceName="pris-estimate")
-            inst.instantiate(callbacks=_callbacks())
+            inst.instantiate(callbacks=_callbacks(), loggingOn=True)
+            _errors_only(inst)
         self.instance = inst
         self._used = False
 
@@ -213,19 +268,36 @@ class FmuModel:
         self.samples += int(n)
         if self.instance is None:
             self._instantiate()
+        mark = _log_mark()
         try:
             y = self._run(values, float(fs), int(n), u)
         except Exception as exc:  # a refused value, a failed call: the instance may be unusable
-            y, self.last_error = None, f"{type(exc).__name__}: {exc}"
+            y, self.last_error = None, _log_since(mark) or f"{type(exc).__name__}: {exc}"
         if y is not None and not np.all(np.isfinite(y)):
             y, self.last_error = None, "non-finite outputs"
         if y is not None and np.max(np.abs(y), initial=0.0) > self.limit:
             y, self.last_error = None, f"outputs beyond {self.limit:g} (diverged)"
         if y is None:
             self.failures += 1
-            self._free()
-            self._instantiate()
+            key = _reason_key(self.last_error)
+            row = self.failure_reasons.setdefault(key, {"runs": 0, "at": {k: float(v) for k, v in values.items()}})
+            row["runs"] += 1
+            self._recover()
         return y
+
+    def _recover(self) -> None:
+        """After a failed run: reset the instance (allowed in the FMI error state); when even that fails,
+        a fresh instance, the old one dropped without ``freeInstance`` (some Python FMUs crash the host
+        process when freed)."""
+        try:
+            self.instance.reset()
+            self._used = False
+            return
+        except Exception:
+            pass
+        self._dropped.append(self.instance)
+        self.instance = None
+        self._instantiate()
 
     def _run(self, values: Mapping[str, float], fs: float, n: int, u: np.ndarray | None) -> np.ndarray:
         inst = self.instance

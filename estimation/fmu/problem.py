@@ -381,11 +381,13 @@ class FmuProblem:
 
     def stats(self) -> dict[str, Any]:
         return {"simulations": self.simulations, "failures": self.model.failures, "seconds": self.seconds,
-                "samples": self.model.samples, "last_error": self.model.last_error}
+                "samples": self.model.samples, "last_error": self.model.last_error,
+                "failure_reasons": {k: dict(v) for k, v in self.model.failure_reasons.items()}}
 
     def reset_stats(self) -> None:
         self.simulations, self.seconds = 0, 0.0
         self.model.failures = self.model.samples = 0
+        self.model.failure_reasons = {}
 
 
 _PROBLEMS: dict[str, FmuProblem] = {}

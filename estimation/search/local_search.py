@@ -294,10 +294,15 @@ class _Stalled(Exception):
     pass
 
 
+class _Settled(Exception):
+    pass
+
+
 def staged_least_squares(residual: Callable[[np.ndarray, Any], tuple[np.ndarray, float]], x0: np.ndarray,
                          stages: Sequence[Any], cap: int, counter: Callable[[], int],
-                         label: Callable[[Any], str] = str, diff_step: float = 1e-5, finish: bool = True
-                         ) -> dict[str, Any]:
+                         label: Callable[[Any], str] = str, diff_step: float = 1e-5, finish: bool = True,
+                         report: Callable[[str, int, float], None] | None = None,
+                         settled: Callable[[Any, np.ndarray, float, float], bool] | None = None) -> dict[str, Any]:
     """Trust-region least squares in the unit cube, one per stage, each starting where the last ended.
 
     Every stage but the last (every stage when ``finish`` is false) also stops when its best cost fell by
@@ -322,6 +327,12 @@ def staged_least_squares(residual: Callable[[np.ndarray, Any], tuple[np.ndarray,
         Finite-difference step of the two-point Jacobian (unit cube).
     finish : bool
         Run the last stage to its minimum (no stop on progress).
+    report : callable, optional
+        ``report(stage text, runs of the stage, best cost)`` after every evaluation (progress lines).
+    settled : callable, optional
+        ``settled(stage, r_best, cost_then, cost_now) -> bool``: also stop a stage when this says that the fall
+        of the best cost over the last ``STALL_SPAN (n + 1)`` evaluations is within the noise (e.g. less than
+        one chi-square unit at a residual that is the record's noise).
 
     Returns
     -------
@@ -338,7 +349,7 @@ def staged_least_squares(residual: Callable[[np.ndarray, Any], tuple[np.ndarray,
     for k, stage in enumerate(stages):
         stalls = k < len(stages) - 1 or not finish
         start = counter()
-        best = {"x": [float(v) for v in x], "cost": math.inf}
+        best = {"x": [float(v) for v in x], "cost": math.inf, "r": None}
         trace: list[float] = []
 
         def fun(z: np.ndarray, stage: Any = stage, start: int = start, stalls: bool = stalls) -> np.ndarray:
@@ -347,10 +358,15 @@ def staged_least_squares(residual: Callable[[np.ndarray, Any], tuple[np.ndarray,
             if (stalls and len(trace) > span
                     and trace[-1] > trace[-1 - span] * (1.0 - STALL_FRACTION)):
                 raise _Stalled
+            if (settled is not None and len(trace) > span and best["r"] is not None
+                    and settled(stage, best["r"], trace[-1 - span], trace[-1])):
+                raise _Settled
             r, c = residual(z, stage)
             if c < best["cost"]:
-                best["x"], best["cost"] = [float(v) for v in z], float(c)
+                best["x"], best["cost"], best["r"] = [float(v) for v in z], float(c), r
             trace.append(best["cost"])
+            if report is not None:
+                report(label(stage), counter() - start, best["cost"])
             return r
 
         text = label(stage)
@@ -362,6 +378,8 @@ def staged_least_squares(residual: Callable[[np.ndarray, Any], tuple[np.ndarray,
             messages.append(f"{text}: stopped at the cap of {cap} runs")
         except _Stalled:
             messages.append(f"{text}: stopped on progress (cost fell < {STALL_FRACTION:g} over {span} runs)")
+        except _Settled:
+            messages.append(f"{text}: stopped at the noise (cost fell within it over {span} runs)")
         if not math.isfinite(best["cost"]):
             best["cost"] = float(residual(np.asarray(best["x"]), stage)[1])
         x = np.asarray(best["x"], float)

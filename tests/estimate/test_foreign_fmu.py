@@ -27,9 +27,12 @@ REPO = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def built(tmp_path_factory):
-    """The two FMUs, built once per module."""
+    """The FMUs whose builder is installed (pythonfmu; pythonfmu3 for the FMI 3.0 one), built once per module."""
+    import importlib.util
+
     root = tmp_path_factory.mktemp("foreign")
-    return {name: ff.build(name, root / name) for name in ff.MODELS}
+    return {name: ff.build(name, root / name) for name, m in ff.MODELS.items()
+            if importlib.util.find_spec(m.get("builder", "pythonfmu")) is not None}
 
 
 def _estimate(cfg: dict, tmp: Path) -> dict:
@@ -61,6 +64,8 @@ def test_held_record_replays_exactly_at_the_truth(built, tmp_path, name):
     from estimation.fmu.model import FmuModel
     from estimation.holds import decide_hold
 
+    if name not in built:
+        pytest.skip(f"{ff.MODELS[name].get('builder')} is not installed")
     m = ff.MODELS[name]
     w = ff.read(ff.record(name, built[name], tmp_path / "r.csv", n=1024))
     hold, reason = decide_hold(w[m["input"]], m["input"])
@@ -68,8 +73,9 @@ def test_held_record_replays_exactly_at_the_truth(built, tmp_path, name):
     fs = 1.0 / (w["time_s"][1] - w["time_s"][0])
     scores = {}
     for h in ("zoh", "linear"):
-        with FmuModel(built[name], list(m["truth"]), m["outputs"], input=m["input"], hold=h) as fm:
-            y = fm.simulate(m["truth"], fs, w["time_s"].size, w[m["input"]])
+        truth = ff.fmu_truth(name)
+        with FmuModel(built[name], list(truth), m["outputs"], input=m["input"], hold=h) as fm:
+            y = fm.simulate(truth, fs, w["time_s"].size, w[m["input"]])
         scores[h] = max(float(np.sqrt(np.mean((y[k] - w[o]) ** 2) / np.mean(w[o] ** 2)))
                         for k, o in enumerate(m["outputs"]))
     assert scores["zoh"] < 1e-9, scores
