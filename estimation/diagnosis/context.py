@@ -94,9 +94,10 @@ class Context:
     def settled(self, r: FitResult) -> bool:
         """No further cause is sought after ``r``: it fits to the noise floor (at or below the data's; within
         ``NOISE_MARGIN`` of :meth:`residual_floor` with white residuals, :func:`.evidence.residuals_white`) without moving
-        any value more than ``GROSS_DRIFT`` tolerances, or it has a new section (which shares the winding's values out
-        anew, so values off the design are its own), fits to the noise floor and, on one-port data, leaves white
-        residuals."""
+        any value more than ``GROSS_DRIFT`` tolerances. A new section does not change this: its own values are not
+        anchored to the design (:meth:`.prior.DesignPrior.anchored`), so a value of the design it leaves far off is
+        one the fit moved to take another cause's share (a split beside a skin effect at the noise with a section's
+        L and C moved 2-4x), and the other causes are still sought."""
         # at or below the data's own floor (an overestimate on a resonant winding) the fit is at the noise anyway;
         # within the margin above it, only if what is left looks like noise (white along frequency)
         # (one-port data only, as the residuals' floor: on several responses a few per cent of structure left in a
@@ -104,9 +105,7 @@ class Context:
         white = None if not self.one_port or self.weights else residuals_white(r.errors)
         if r.objective > self.floor and (r.objective > NOISE_MARGIN * self.residual_floor(r) or white is False):
             return False
-        # a new section with values grossly off the design is at the noise only if what is left looks like noise:
-        # the values moved make up for something else (an effect whose share the drift took)
-        return not self.distorted(r) or (bool(r.structure) and white is not False)
+        return not self.distorted(r)
 
     def residual_floor(self, r: FitResult) -> float:
         """The noise floor estimated from the third differences of ``r``'s residuals, if below the data's.

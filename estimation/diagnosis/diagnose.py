@@ -41,8 +41,9 @@ Steps:
    as the first cause is fitted together with each effect (pairs). Selection stops when the cost
    reaches the noise floor estimated from the data (:func:`.evidence.noise_floor`; for one-port data also
    ``NOISE_MARGIN`` times the floor estimated from the model's residuals, :meth:`Context.residual_floor`)
-   without values moved far off the design, or, once a section was added,
-   whatever the values (a new section shares the winding's values out anew).
+   without values of the design moved far off it (a new section's own values
+   are not anchored to the design; one it leaves far off took another
+   cause's share).
    A new section sought before any other cause is named frees the tight
    couplings of the sections it touches (:mod:`.sections`), in its fit and
    every later refit of that model; one sought after a frequency-dependent
