@@ -55,10 +55,11 @@ def prbs(order: int) -> np.ndarray:
 
 def record(order: int = 6, fclk: float = 100e3, fs: float = 10e6, periods: int = 2, vdc: float = 100.0,
            rpris: float = 150.0, lpris: float = 4e-3, cpris: float = 1e-6, contact: float = 0.0,
-           lsw: float = 0.0, csw: float = 0.0, stray: float = 0.0, noise: float = 0.0, seed: int = 1
-           ) -> dict[str, np.ndarray]:
+           lsw: float = 0.0, csw: float = 0.0, stray: float = 0.0, noise: float = 0.0, seed: int = 1,
+           winding: str = WINDING) -> dict[str, np.ndarray]:
     """``time_s, v_bprbs, v_in, i_in`` of the arrangement; ``noise``: relative standard deviation (of each
-    channel's own standard deviation) of white noise added to ``v_in`` and ``i_in``."""
+    channel's own standard deviation) of white noise added to ``v_in`` and ``i_in``; ``winding``: the
+    winding's SPICE lines (its port ``n1``, default the three sections of Table 4.7)."""
     exe = shutil.which("ngspice")
     if exe is None:
         raise FileNotFoundError("ngspice")
@@ -82,7 +83,7 @@ def record(order: int = 6, fclk: float = 100e3, fs: float = 10e6, periods: int =
     lines += [f"Rp {node} r1 {rpris!r}", "Vsense r1 r1s 0", f"Lp r1s r2 {lpris!r}", f"Cp r2 n1 {cpris!r}"]
     if stray > 0:
         lines.append(f"Cstray n1 0 {stray!r}")
-    deck = "\n".join(lines) + "\n" + WINDING + (
+    deck = "\n".join(lines) + "\n" + winding + (
         f".tran {1 / fs!r} {float(t[-1])!r} 0 {0.1 / fs!r} uic\n.control\nset wr_singlescale\noption numdgt=16\nrun\n"
         "wrdata out.txt v(n1) i(Vsense)\n.endc\n.end\n")
     with tempfile.TemporaryDirectory() as tmp:

@@ -59,13 +59,36 @@ FINE_POINTS = 4
 
 @dataclass
 class Part:
-    """One candidate of the arrangement's catalogue: a source cause or one form of a winding cause."""
+    """One candidate of the arrangement's catalogue: a source cause, one form of a winding cause, or a
+    structure of the winding (``circuit``: a winding with one section more, :mod:`.replay_sections`).
+
+    Attributes
+    ----------
+    cause : str
+    effect : Effect, optional
+        The form of a winding cause.
+    circuit : Circuit, optional
+        The winding replacing the design's (a structural cause).
+    how : str
+        What the structure is (e.g. "section 2 of the winding at n1 is two sections").
+    couplings : tuple of str
+        K elements of ``circuit`` fitted with its values.
+    values : dict
+        Lower-case name to value (SI) of the structure's own values as last fitted: the start of a refit
+        from a fit of another structure.
+    """
 
     cause: str
     effect: Effect | None = None
+    circuit: Circuit | None = field(default=None, repr=False)
+    how: str = ""
+    couplings: tuple[str, ...] = ()
+    values: dict[str, float] = field(default_factory=dict, repr=False)
 
     @property
     def label(self) -> str:
+        if self.circuit is not None:
+            return self.how
         return self.effect.label if self.effect is not None else f"{self.cause} [source]"
 
 
@@ -87,6 +110,10 @@ class ReplayFit:
     predicted: np.ndarray = field(repr=False)
     nfev: int = 0
     wall_s: float = 0.0
+    #: The winding's structure ("" for the design's, else the structural part's ``how``).
+    structure: str = ""
+    #: Lower-case names of the winding values the design prior holds in this structure.
+    held: frozenset[str] = frozenset()
 
     @property
     def causes(self) -> list[str]:
@@ -143,8 +170,11 @@ class ReplayProblem:
         self.neg = self.W < 0
         fgrid = np.abs(self.W).ravel() / (2 * np.pi)
         effects = [p.effect for p in self.parts if p.effect is not None]
-        self.ff = FrequencyFit(circuit, configs, fgrid, {response: np.ones(fgrid.size, complex)}, fixed, effects,
-                               scale=scale)
+        shape = next((p for p in self.parts if p.circuit is not None), None)
+        self.structure = shape.how if shape is not None else ""
+        self.ff = FrequencyFit(shape.circuit if shape is not None else circuit, configs, fgrid,
+                               {response: np.ones(fgrid.size, complex)}, fixed, effects, scale=scale,
+                               couplings=shape.couplings if shape is not None else ())
         self.response = response
         self.nominal = np.array([nominal["rpris"], nominal["lpris"], nominal["cpris"]], float)
         freed = {v for p in self.parts for v in SOURCE_FREES.get(p.cause, ())}
@@ -156,6 +186,10 @@ class ReplayProblem:
         names = [n.lower() for n in self.ff.free]
         anchored = set(design) if anchored is None else (anchored(self.ff.circuit) if callable(anchored) else anchored)
         idx = [i for i, n in enumerate(names) if n in anchored and n in design]
+        self.held = frozenset(names[i] for i in idx)
+        #: Circuit values with no prior (a structure's own, freed couplings, or every one with an infinite
+        #: tolerance): they count as parameters of the fit.
+        self.n_unheld = len(names) - (len(idx) if math.isfinite(self.tau_w) else 0)
         self.w_idx = np.array(idx, int)
         self.w_log = np.array([math.log(self.ff.start[i] / design[names[i]]) for i in idx])
         self.design = dict(design)
@@ -391,15 +425,22 @@ class ReplayProblem:
         xc = x[self.n_src:][None, :self.ff.nc]
         winding = {n.lower(): float(v) for n, v in zip(self.ff.free, self.ff.values_of(xc)[0])}
         extra = self.ff.extra_values(x[self.n_src:])
-        n_par = int((~self.src_held).sum()) + (2 if self.ring else 0) + len(self.ff.extra) + self.n_transient
+        n_par = (int((~self.src_held).sum()) + (2 if self.ring else 0) + len(self.ff.extra) + self.n_transient
+                 + self.n_unheld)
         return ReplayFit(self.parts, x, float(np.sum(r[:nd] ** 2)), float(np.sum(r[nd:] ** 2)), nd, n_par,
-                         float(sum(per.values())), per, source, winding, extra, pred, nfev, wall)
+                         float(sum(per.values())), per, source, winding, extra, pred, nfev, wall, self.structure,
+                         self.held)
 
     def start_from(self, fit: ReplayFit | None) -> list[np.ndarray]:
         """Start vectors: the values of ``fit`` (nominal and design without one) with every start of the new
         parts' parameters."""
         src = fit.source if fit is not None else {}
         wnd = fit.winding if fit is not None else {}
+        if fit is not None and fit.structure != self.structure:
+            # another structure: only the values both hold alike, the structure's own as it was last fitted
+            wnd = {k: v for k, v in wnd.items() if k in self.held and k in fit.held}
+            for p in self.parts:
+                wnd.update(p.values)
         given = {}
         if fit is not None:
             labels = [p.effect.label for p in fit.parts if p.effect is not None]

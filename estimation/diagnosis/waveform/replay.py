@@ -54,6 +54,8 @@ from estimation.diagnosis.causes.catalogue import effect_variants, winding_group
 from estimation.diagnosis.fit import DiagnosisError
 from estimation.diagnosis.prior import DEFAULT_TOLERANCE, DesignPrior
 from estimation.diagnosis.waveform.joint_fit import Part, ReplayFit, ReplayProblem
+from estimation.diagnosis.waveform.replay_sections import CAUSE as SECTION_CAUSE
+from estimation.diagnosis.waveform.replay_sections import best_section, section_structures
 from estimation.diagnosis.waveform.record_spectra import PeriodicRecord, periodic_record
 from estimation.diagnosis.result import DiagnosisOutcome
 from estimation.diagnosis.waveform.signals import SIGNALS, UNITS
@@ -61,6 +63,8 @@ from estimation.diagnosis.waveform.signals import SIGNALS, UNITS
 #: The arrangement's catalogue: the source's causes, then the winding's.
 SOURCE_CAUSES = ("series-resistance", "component-drift", "switch-ringing")
 WINDING_CAUSES = ("core-loss", "skin-effect", "magnetising-inductance", "stray-capacitance", "lead-inductance")
+#: The winding's structural cause: a section more than the design (:mod:`.replay_sections`).
+STRUCTURAL_CAUSES = (SECTION_CAUSE,)
 #: Default relative tolerance of the source's nominal values (the instrument's own).
 DEFAULT_SOURCE_TOLERANCE = 0.01
 #: Evaluations of the short fit that screens each form of a cause (the best form is then refined).
@@ -144,19 +148,29 @@ class _Catalogue:
                                  level=math.isfinite(tolerance))
             if vs:
                 self.variants[c] = [Part(c, e) for e in vs]
+        self.structures = section_structures(circuit, configs[0].port)
+        if self.structures:  # searched by :func:`.replay_sections.best_section`, not by forms
+            self.variants[SECTION_CAUSE] = []
+        self.progress = False
+
+    def problem(self, parts: Sequence[Part]) -> ReplayProblem:
+        return ReplayProblem(*self.args, parts, self.scale, self.design, self.prior.anchored)
 
     def fit(self, parts: Sequence[Part], start: ReplayFit | None, max_nfev: int = 40, screen: int = 2,
             theta: np.ndarray | None = None) -> ReplayFit:
-        prob = ReplayProblem(*self.args, parts, self.scale, self.design, self.prior.anchored)
+        prob = self.problem(parts)
         t = time.perf_counter()
         r = prob.fit([theta] if theta is not None else prob.start_from(start), max_nfev=max_nfev, screen=screen)
         r.wall_s = time.perf_counter() - t
         return r
 
-    def best_with(self, current: ReplayFit, cause: str) -> ReplayFit:
+    def best_with(self, current: ReplayFit, cause: str) -> ReplayFit | None:
         """``current``'s parts plus the best form of ``cause``: every form screened by a short fit from
-        ``current``, the best refined (unless none ends below ``current``)."""
+        ``current``, the best refined (unless none ends below ``current``); for the structural cause the best
+        structure (:func:`.replay_sections.best_section`, None when none can be fitted)."""
         t = time.perf_counter()
+        if cause == SECTION_CAUSE:
+            return best_section(self.problem, current, self.structures, lambda m: _log(m, self.progress))
         forms = self.variants[cause]
         if len(forms) == 1:
             return self.fit(list(current.parts) + forms, current)
@@ -251,6 +265,7 @@ def diagnose_pris_record(
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = float(np.median(np.abs(rec.Y[:, 0] / rec.Y[:, 1])))
     cat = _Catalogue(rec, circ, configs, names[0], model.fixed, nominal, source_tolerance, tolerance, scale, design)
+    cat.progress = progress
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1):
@@ -268,7 +283,10 @@ def _select(cat: _Catalogue, rec: PeriodicRecord, nominal, why, min_delta_bic, m
     fits = [baseline]
     singles: dict[str, ReplayFit] = {}
     for cause in cat.variants:
+        tc = time.perf_counter()
         r = cat.best_with(baseline, cause)
+        if r is None:
+            continue
         singles[cause] = r
         fits.append(r)
         ok, dbic, gain = _significant(baseline, r, min_delta_bic, min_gain)
@@ -281,8 +299,10 @@ def _select(cat: _Catalogue, rec: PeriodicRecord, nominal, why, min_delta_bic, m
         if not ok:
             break
         new = next(c for c in best.causes if c not in current.causes)
+        added = next(p for p in best.parts if p.cause == new)
         steps.append({"cause": new, "gain": gain, "delta_bic": dbic, "cost": best.cost,
-                      "total_gain": 1 - best.objective / baseline.objective, "form": best.parts[-1].label})
+                      "total_gain": 1 - best.objective / baseline.objective, "form": added.label,
+                      "model": _model(best)})
         _log(f"step {len(steps)}: {new} (gain {gain:.3f}, dBIC {dbic:.1f})", progress)
         current = best
         pool = {}
@@ -293,6 +313,7 @@ def _select(cat: _Catalogue, rec: PeriodicRecord, nominal, why, min_delta_bic, m
                 continue
             # the form the cause took alone, refitted with those named
             r = cat.fit(list(current.parts) + [single.parts[-1]], current, max_nfev=COMBO_NFEV)
+            _log(f"  with {cause}: chi2/N {r.rss / N:.4g} ({r.wall_s:.1f} s)", progress)
             fits.append(r)
             pool[cause] = r
     # backward check: each named cause against the model without it
@@ -308,7 +329,7 @@ def _select(cat: _Catalogue, rec: PeriodicRecord, nominal, why, min_delta_bic, m
                 current, changed = r, True
                 break
     current, steps = _tolerance_check(cat, current, nominal, steps, progress)
-    drift = cat.prior.drift({k: v for k, v in current.winding.items()})
+    drift = cat.prior.drift({k: v for k, v in current.winding.items() if k in current.held})
     causes = current.causes
     steps = _with_values(steps, current, nominal)
     noise = {"cost": float(np.sum([np.sum(rec.sigma[:, j] ** 2) / np.sum(np.abs(rec.Y[:, j]) ** 2)
@@ -327,6 +348,12 @@ def _select(cat: _Catalogue, rec: PeriodicRecord, nominal, why, min_delta_bic, m
     d.wall_s = time.perf_counter() - t0
     _log(f"cause: {d.cause} (gain {d.gain:.3f}) in {d.wall_s:.1f} s", progress)
     return d
+
+
+def _model(fit: ReplayFit) -> str:
+    """The winding model of ``fit`` as the frequency path names it: the structure, then the effects' forms."""
+    return fit.structure + ("; " if fit.structure and any(p.effect for p in fit.parts) else "") + \
+        ", ".join(p.effect.label for p in fit.parts if p.effect is not None)
 
 
 def _tolerance_check(cat: _Catalogue, current: ReplayFit, nominal, steps, progress):
