@@ -12,7 +12,11 @@ One catalogue for the arrangement
     source: ``series-resistance`` (``R`` freed), ``component-drift`` (``L``
     and ``C`` freed), ``switch-ringing`` (``L_sw`` in series with the bridge,
     ``C_sw`` across it); winding: the frequency catalogue's one-port causes
-    (:func:`.catalogue.effect_variants`: every form, the best kept).
+    (:func:`.catalogue.effect_variants`: every form, the best kept) and the
+    structural ``missing-section`` (:mod:`.replay_sections`: every section of
+    the design split in two and a section added at each end, each a new
+    problem on its circuit; the structure's own values count as parameters
+    of the BIC below).
 
 Selection
     Forward: the candidate adding one cause to the current model with the

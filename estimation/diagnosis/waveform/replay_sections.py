@@ -16,21 +16,24 @@ values; the design has not):
 
 Each structure is a new :class:`.joint_fit.ReplayProblem` on its circuit,
 the source and the causes already named included: the split section's
-values and the new elements carry no prior (the design says nothing of
-them; :meth:`.prior.DesignPrior.anchored`), every other value keeps its
-prior. So they count as parameters of the BIC (``k`` in
-:func:`.replay._significant`), as do the couplings freed.
+values, the new elements and the couplings of the changed inductors (both
+halves of a split, or the added one, and the tight couplings the change
+touches) carry no prior (the design says nothing of them;
+:meth:`.prior.DesignPrior.anchored`), every other value keeps its prior. So
+they count as parameters ``k`` of the replay's BIC (:func:`.replay._significant`):
+a structure pays ``ln N`` per value it frees, which is what the frequency
+path's held-out check guards against; no further check is applied.
 
 Cost
     Every structure is *screened*: its seeds (:meth:`.Unmerged.seeds`: the
     inductance shared unequally, the series capacitances in ratio, the new
     node's capacitance over a grid; for an added section its inductance
-    scales), started from the values of the current fit and from the design
-    values, are costed in one batch, and the best gets a short fit
+    scales), set on the values of the current fit and on the design values,
+    are costed in one batch, and the best gets a short fit
     (``SCREEN_NFEV`` evaluations). The best ``REFINE`` structures are then
-    fitted in full (``SECTION_NFEV``), and each again with the couplings of
-    its new inductor free (``COUPLING_NFEV``); the couplings stay free when
-    that lowers the noise-scaled BIC.
+    fitted in full (``SECTION_NFEV`` evaluations, started afresh from where
+    the last fit ended while that lowers the objective by ``RESTART_GAIN``:
+    a trust region shrunk on a degenerate network stops early).
 
 Why the exact replay screens (and not the H1 of ``v_in / i_in``)
     The record's spectra are exact for the replay, while the ratio of the
