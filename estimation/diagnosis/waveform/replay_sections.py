@@ -75,7 +75,6 @@ SECTION_NFEV = 40
 #: Fresh starts of the full fit from where the last ended, while one lowers the objective by ``RESTART_GAIN``.
 RESTARTS = 10
 RESTART_GAIN = 0.01
-COUPLING_NFEV = 40
 
 
 @dataclass
