@@ -398,6 +398,9 @@ def _with_values(steps, fit: ReplayFit, nominal) -> list[dict[str, Any]]:
             "switch-ringing": {"lsw": src.get("lsw"), "csw": src.get("csw"),
                                "f_ring_hz": (1 / (2 * math.pi * math.sqrt(src["lsw"] * src["csw"]))
                                              if "lsw" in src else None)}}
+    shape = next((p for p in fit.parts if p.circuit is not None), None)
+    if shape is not None:  # the structure's own values and couplings as fitted (no prior)
+        vals[shape.cause] = {"structure": shape.how, **{k: v for k, v in fit.winding.items() if k not in fit.held}}
     out = []
     for s in steps:
         s = dict(s)
