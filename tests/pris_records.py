@@ -39,6 +39,34 @@ K13 L1 L3 0.8729
 K23 L2 L3 0.8564
 """
 
+#: Section 2 of Table 4.7 as two sections (half its resistance each, twice its series capacitance each, 1.6 nF
+#: from the new node to ground): L2 + L2b + 2 k sqrt(L2 L2b) = 181 uH with k = 0.9, the couplings of the two to
+#: L1 and L3 chosen so that the merged section's mutual inductances are Table 4.7's.
+FOUR_SECTIONS = """* four sections: section 2 of Table 4.7 made two
+R1 n1 x1 0.083
+L1 x1 n2 181u
+Cs1 n1 n2 0.97n
+R2 n2 x2 0.0415
+L2 x2 m2 47.63u
+Cs2 n2 m2 1.94n
+R2b m2 y2 0.0415
+L2b y2 n3 47.63u
+Cs2b m2 n3 1.94n
+R3 n3 x3 0.083
+L3 x3 0 181u
+Cs3 n3 0 0.97n
+Cg1 n1 0 0.8n
+Cg2 n2 0 1.6n
+Cgm m2 0 1.6n
+Cg3 n3 0 1.6n
+K12 L1 L2 0.8568
+K12b L1 L2b 0.8568
+K13 L1 L3 0.8729
+K22b L2 L2b 0.9
+K23 L2 L3 0.8347
+K2b3 L2b L3 0.8347
+"""
+
 
 def prbs(order: int) -> np.ndarray:
     """One period (``2^order - 1`` bits) of a maximal-length sequence, as +-1."""
