@@ -158,6 +158,7 @@ class _Catalogue:
         self.progress = False
 
     def problem(self, parts: Sequence[Part]) -> ReplayProblem:
+        """The record's problem with ``parts`` (a structural part brings its own circuit)."""
         return ReplayProblem(*self.args, parts, self.scale, self.design, self.prior.anchored)
 
     def fit(self, parts: Sequence[Part], start: ReplayFit | None, max_nfev: int = 40, screen: int = 2,
