@@ -80,7 +80,19 @@ class Context:
         if self.prior is None:
             return []
         anchored = self.prior.anchored(r.circuit)
-        return self.prior.drift({n: v for n, v in r.values.items() if n.lower() in anchored})
+        values = {n: v for n, v in r.values.items() if n.lower() in anchored}
+        # a section of the design split in two (:class:`.unmerge.Unmerged`): its two halves merged back are the
+        # design's section, and are held to its values (a split whose halves add up to a resistance 3x the design's
+        # explains a drifted value, not a missing section)
+        um = getattr(r, "unmerged", None)
+        if um is not None:
+            try:
+                merged = um.merged_back(r.fitted_circuit())
+            except (KeyError, ValueError, ZeroDivisionError):
+                merged = {}
+            values.update({n: v for n, v in merged.items()
+                           if n.lower() in self.prior.design and n.lower() not in anchored})
+        return self.prior.drift(values)
 
     def gross(self, r: FitResult) -> list[dict[str, Any]]:
         """The values of ``r`` more than ``GROSS_DRIFT`` tolerances from the design."""

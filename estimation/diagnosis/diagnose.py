@@ -454,10 +454,13 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
             # a model that reaches the noise only by moving values far off the design is no explanation: against it, a
             # candidate that reaches the noise within the design, or with fewer values far off (a value really off the
             # design stays off in every model), needs the BIC margin but no share of the cost
-            # (not for a structural candidate: a new section frees the values of the section it touches from the
-            # prior, so it has fewer values off the design by construction, not because it explains what they took)
-            if ctx.distorted(current) and not any(c in STRUCTURAL for c in best.causes) and (ctx.explained(best) or (
-                    best.objective <= NOISE_MARGIN * ctx.floor and len(ctx.gross(best)) < len(ctx.gross(current)))):
+            # (the count not for a structural candidate: a new section frees the values of the section it touches
+            # from the prior, so it has fewer values off the design by construction; a split is measured with its
+            # halves merged back against the design's section, :meth:`.context.Context.drift`)
+            structural = any(c in STRUCTURAL for c in best.causes)
+            if ctx.distorted(current) and (ctx.explained(best) or (
+                    not structural and best.objective <= NOISE_MARGIN * ctx.floor
+                    and len(ctx.gross(best)) < len(ctx.gross(current)))):
                 need = 0.0
             if not significant(current.bic, current.objective, best.bic, best.objective, min_delta_bic, need):
                 break

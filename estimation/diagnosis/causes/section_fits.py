@@ -18,7 +18,7 @@ from estimation.diagnosis.cores import shared_map
 from estimation.diagnosis.fit import (CANDIDATE_FAILURES, WIDE_CONTINUATION, WIDER_CONTINUATION, FitResult,
     FrequencyFit, configuration_ports, current_nc)
 from estimation.diagnosis.causes.sections import section_candidates
-from estimation.diagnosis.causes.unmerge import missing_modes, search_unmerged
+from estimation.diagnosis.causes.unmerge import Unmerged, missing_modes, search_unmerged
 
 
 def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect], must_beat: float,
@@ -53,6 +53,11 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
         except CANDIDATE_FAILURES:
             continue
         res.structure = cand.how
+        if cand.split_of is not None:  # its halves merged back are held to the design's section (:meth:`.Context.drift`)
+            try:
+                res.unmerged = Unmerged(*cand.split_of)
+            except CANDIDATE_FAILURES:
+                pass
         res.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"] if effects else \
             ["missing-section"]
         res.cause = "+".join(res.causes)
@@ -81,6 +86,7 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
             best, um, merged = found
             best.structure = um.candidate.how
             best.merged_back = {**merged.values, **um.merged_back(merged.fitted_circuit())}
+            best.unmerged = um
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
     return best
@@ -195,7 +201,6 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     """
     from estimation.diagnosis.baseline import fit_multistart
     from estimation.diagnosis.causes.sections import find_chains
-    from estimation.diagnosis.causes.unmerge import Unmerged
 
     circuit = ctx.nominal if from_design and ctx.nominal is not None else base.fitted_circuit()
     effects = list(base.effects)
@@ -219,6 +224,7 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
             except CANDIDATE_FAILURES:
                 continue
             res.structure = um.candidate.how + (" (from the design values)" if from_design else "")
+            res.unmerged = um
             res.causes = [c for c in base.causes if c not in ("none", "missing-section")] + ["missing-section"]
             res.cause = "+".join(res.causes)
             log(f"  {um.candidate.how}: cost {res.cost:.4g} ({time.perf_counter() - t:.1f} s)", ctx.progress)
