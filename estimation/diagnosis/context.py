@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -81,18 +82,34 @@ class Context:
             return []
         anchored = self.prior.anchored(r.circuit)
         values = {n: v for n, v in r.values.items() if n.lower() in anchored}
-        # a section of the design split in two (:class:`.unmerge.Unmerged`): its two halves merged back are the
-        # design's section, and are held to its values (a split whose halves add up to a resistance 3x the design's
-        # explains a drifted value, not a missing section)
-        um = getattr(r, "unmerged", None)
-        if um is not None:
-            try:
-                merged = um.merged_back(r.fitted_circuit())
-            except (KeyError, ValueError, ZeroDivisionError):
-                merged = {}
-            values.update({n: v for n, v in merged.items()
-                           if n.lower() in self.prior.design and n.lower() not in anchored})
+        values.update(self.merged(r))
         return self.prior.drift(values)
+
+    def merged(self, r: FitResult) -> dict[str, float]:
+        """A section of the design split in two (:class:`.unmerge.Unmerged`): its halves merged back, by the
+        design's names (empty for any other model, or without a prior).
+
+        Merged back they are the design's section, and are held to its values like every other (a split whose
+        halves add up to a resistance 3x the design's explains a drifted value, not a missing section)."""
+        um = getattr(r, "unmerged", None)
+        if self.prior is None or um is None:
+            return {}
+        try:
+            merged = um.merged_back(r.fitted_circuit())
+        except (KeyError, ValueError, ZeroDivisionError):
+            return {}
+        anchored = self.prior.anchored(r.circuit)
+        return {n: float(v) for n, v in merged.items()
+                if n.lower() in self.prior.design and n.lower() not in anchored and v > 0}
+
+    def penalised(self, r: FitResult) -> float:
+        """``r``'s objective with the prior's penalty on a split section's merged values added (cost units): how
+        structural candidates are ranked, each held to the design as a whole."""
+        if self.prior is None:
+            return r.objective
+        s = self.prior.scale()
+        return r.objective + sum((s * math.log(v / self.prior.design[n.lower()])) ** 2
+                                 for n, v in self.merged(r).items())
 
     def gross(self, r: FitResult) -> list[dict[str, Any]]:
         """The values of ``r`` more than ``GROSS_DRIFT`` tolerances from the design."""

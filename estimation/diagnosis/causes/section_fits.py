@@ -61,13 +61,13 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
         res.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"] if effects else \
             ["missing-section"]
         res.cause = "+".join(res.causes)
-        if best is None or res.objective < best.objective:
+        if best is None or ctx.penalised(res) < ctx.penalised(best):
             best = res
     # a missing section alone (no cause named yet): the design's sections split with their couplings free
     if not effects and ctx.nominal is not None and (ctx.unfit(base)
                                                     or ctx.distorted(base)):
         split = _split_nominal(ctx, effects, tail, ports)
-        if split is not None and (best is None or split.objective < best.objective):
+        if split is not None and (best is None or ctx.penalised(split) < ctx.penalised(best)):
             best = split
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
@@ -82,7 +82,9 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
                                     good_enough=NOISE_MARGIN * STRUCTURAL_FLOOR * ctx.floor)
             if wide:
                 ctx.unmerge_cache["wide"] = found
-        if found is not None and (best is None or found[0].objective < best.objective):
+        if found is not None:
+            found[0].unmerged = found[1]
+        if found is not None and (best is None or ctx.penalised(found[0]) < ctx.penalised(best)):
             best, um, merged = found
             best.structure = um.candidate.how
             best.merged_back = {**merged.values, **um.merged_back(merged.fitted_circuit())}
@@ -228,6 +230,6 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
             res.causes = [c for c in base.causes if c not in ("none", "missing-section")] + ["missing-section"]
             res.cause = "+".join(res.causes)
             log(f"  {um.candidate.how}: cost {res.cost:.4g} ({time.perf_counter() - t:.1f} s)", ctx.progress)
-            if best is None or res.objective < best.objective:
+            if best is None or ctx.penalised(res) < ctx.penalised(best):
                 best = res
     return best
