@@ -35,7 +35,7 @@ BASELINE_SPREAD = 0.3
 
 
 def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: float = BASELINE_SPREAD,
-                   max_nfev: int = 200, good_enough: float = 0.0) -> FitResult:
+                   max_nfev: int = 200, good_enough: float = 0.0, x0: np.ndarray | None = None) -> FitResult:
     """The baseline's values fitted from the given values and, unless that fit is good enough, from random starts.
 
     The fit from the given values is continued from smoothed errors
@@ -61,8 +61,11 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     good_enough : float
         Cost at which the fit from the given values is kept without trying
         the random starts (the noise floor).
+    x0 : numpy.ndarray, optional
+        The start vector (default: the circuit at its values, the effects at
+        their first grid start).
     """
-    x0 = fit.start_vectors()[0]
+    x0 = fit.start_vectors()[0] if x0 is None else np.asarray(x0, float)
     # with a helper process (:mod:`.cores`), the random starts' short fits are handed to it before the fit from the
     # given values runs here (the result does not depend on the order), and given up if that fit is good enough
     batch = _StartsFitted(fit, x0, starts, spread, max_nfev) if starts > 0 and helper_available() else None

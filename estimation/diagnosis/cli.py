@@ -165,8 +165,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             print(f"path: {path.get('path')} ({path.get('why')})")
         if out.get("causes") and len(out["causes"]) > 1:
             print(f"causes: {' + '.join(out['causes'])}")
+        if out.get("misfit"):
+            print(f"  {out['misfit']}")
         for d in out.get("drift") or []:
-            print(f"  drift {d['name']}: design {d['design']:.4g}, fitted {d['fitted']:.4g} (x{d['ratio']:.3g})")
+            print(f"  drift {d['name']}: " + (f"{', '.join(d['members'])} together x{d['ratio']:.3g}" if d.get("group")
+                  else f"design {d['design']:.4g}, fitted {d['fitted']:.4g} (x{d['ratio']:.3g})"))
             if d.get("parallel"):
                 print(f"    ({parallel_note(d)})")
         for c in out["candidates"]:

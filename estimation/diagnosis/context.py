@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -17,14 +18,17 @@ from estimation.diagnosis.drift import GROSS_DRIFT
 from estimation.diagnosis.evidence import noise_variance, residuals_white
 from estimation.diagnosis.fit import FitResult, FrequencyFit
 from estimation.diagnosis.prior import DesignPrior
+from estimation.diagnosis.verdict import FIT_FACTOR
 
 MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
 #: Selection stops once the cost is within this factor of the noise floor.
 NOISE_MARGIN = 1.25
 #: Causes that add circuit elements: named only if they also pass the held-out check (:mod:`.holdout`).
 STRUCTURAL = ("missing-section",)
-#: A section split from the nominal circuit is sought when the fitted baseline's cost is this many times the noise
-#: floor (or a measured resonance is missing from it).
+#: A first structural cause whose fit stays this many times above the noise floor (a split of the design values, or
+#: a section with its couplings free) is refused as the first cause (:func:`.diagnose._select`): with that much
+#: misfit left, the new section's free values take the share of a frequency-dependent effect. (The search for a
+#: missing section itself runs whenever the model does not explain the data, :meth:`Context.unfit`.)
 UNMERGE_ABOVE_FLOOR = 10.0
 #: Evaluations per smoothed stage of every seed of the wide split search (:func:`.unmerge.search_unmerged`, one-port
 #: data that no single cause explains): 8 leaves a split of design values 10 % off hundreds of times above the noise,
@@ -77,7 +81,35 @@ class Context:
         if self.prior is None:
             return []
         anchored = self.prior.anchored(r.circuit)
-        return self.prior.drift({n: v for n, v in r.values.items() if n.lower() in anchored})
+        values = {n: v for n, v in r.values.items() if n.lower() in anchored}
+        values.update(self.merged(r))
+        return self.prior.drift(values)
+
+    def merged(self, r: FitResult) -> dict[str, float]:
+        """A section of the design split in two (:class:`.unmerge.Unmerged`): its halves merged back, by the
+        design's names (empty for any other model, or without a prior).
+
+        Merged back they are the design's section, and are held to its values like every other (a split whose
+        halves add up to a resistance 3x the design's explains a drifted value, not a missing section)."""
+        um = getattr(r, "unmerged", None)
+        if self.prior is None or um is None:
+            return {}
+        try:
+            merged = um.merged_back(r.fitted_circuit())
+        except (KeyError, ValueError, ZeroDivisionError):
+            return {}
+        anchored = self.prior.anchored(r.circuit)
+        return {n: float(v) for n, v in merged.items()
+                if n.lower() in self.prior.design and n.lower() not in anchored and v > 0}
+
+    def penalised(self, r: FitResult) -> float:
+        """``r``'s objective with the prior's penalty on a split section's merged values added (cost units): how
+        structural candidates are ranked, each held to the design as a whole."""
+        if self.prior is None:
+            return r.objective
+        s = self.prior.scale()
+        return r.objective + sum((s * math.log(v / self.prior.design[n.lower()])) ** 2
+                                 for n, v in self.merged(r).items())
 
     def gross(self, r: FitResult) -> list[dict[str, Any]]:
         """The values of ``r`` more than ``GROSS_DRIFT`` tolerances from the design."""
@@ -90,6 +122,14 @@ class Context:
     def explained(self, r: FitResult) -> bool:
         """``r`` fits to the noise floor without moving any value more than ``GROSS_DRIFT`` tolerances."""
         return r.objective <= NOISE_MARGIN * self.floor and not self.distorted(r)
+
+    def unfit(self, r: FitResult) -> bool:
+        """``r`` does not explain the data: its cost is above :data:`.verdict.FIT_FACTOR` times the noise floor.
+
+        Every structure (a section split or added anywhere, from the fitted and from the design values) is sought
+        for such a model: a misfit no estimate of the noise accounts for (:mod:`.verdict`).
+        """
+        return r.cost > FIT_FACTOR * self.floor
 
     def settled(self, r: FitResult) -> bool:
         """No further cause is sought after ``r``: it fits to the noise floor (at or below the data's; within

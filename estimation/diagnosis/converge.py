@@ -30,7 +30,7 @@ from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, current_nc
 CONVERGE_NFEV = 300
 
 #: Attributes of a fit result that say how its structure was found, carried over to the refit.
-_PROVENANCE = ("merged_back", "from_design")
+_PROVENANCE = ("merged_back", "from_design", "unmerged")
 
 
 def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: None) -> FitResult:

@@ -20,8 +20,14 @@ Steps:
    missing section is also sought from the nominal circuit as two whole
    sections seeded at the measured resonances (:mod:`.unmerge`); its two
    sections merged back refit the baseline. For one-port data that no
-   single cause explains, every seed of every such split is also fitted
-   through smoothed errors (``WIDE_SEED_NFEV`` evaluations a stage).
+   single cause explains, every section of the fitted model (and, when the
+   baseline needed values far off the design, of the design) is made two
+   whole sections and fitted from several starts
+   (:func:`.section_fits.split_every_section`), alone and beside the effect
+   that does best alone. A baseline that does not explain the data
+   (:meth:`.context.Context.unfit`) is also tried against the drift of a
+   whole group of values (:mod:`.group_drift`), the answer when its BIC is
+   below every single cause's.
 3. Forward selection: the cause with the lowest Bayesian information
    criterion ``BIC = N ln(RSS/N) + k ln N`` is named if it beats the
    baseline's BIC by ``min_delta_bic`` (10: "very strong" evidence on Kass and
@@ -55,7 +61,9 @@ Steps:
    are fitted again with the changed model and the selection goes on from
    it (once).
 4. What is still above the noise after the last step is reported by band
-   (:func:`.evidence.unexplained_bands`).
+   (:func:`.evidence.unexplained_bands`). A model that stays above twice the
+   noise floor does not explain the data (:mod:`.verdict`): with no cause
+   named the answer is ``unexplained``, never ``none``.
 """
 
 from __future__ import annotations
@@ -77,8 +85,8 @@ from estimation.diagnosis.cores import helper_available, shared_map
 from estimation.diagnosis.causes.catalogue import FREQUENCY_CAUSES, Effect
 from estimation.diagnosis.evidence import (band_table, localise, noise_floor, noise_weights, resonance_comparison,
     unexplained_bands)
-from estimation.diagnosis.fit import (CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit, current_nc,
-    significant)
+from estimation.diagnosis.fit import (CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit,
+    configuration_ports, current_nc, significant)
 from estimation.diagnosis.drift import located_drift, relaxed_drift, with_parallel
 from estimation.diagnosis.converge import converged
 from estimation.diagnosis.holdout import held_out_gain
@@ -87,9 +95,11 @@ from estimation.diagnosis.causes.forms import rechoose_forms
 from estimation.diagnosis.causes.realise import realise_extended
 from estimation.diagnosis.report import parallel_note
 from estimation.diagnosis.result import Diagnosis
-from estimation.diagnosis.causes.section_fits import fit_missing_section, section_pairs
+from estimation.diagnosis.causes.section_fits import fit_missing_section, section_pairs, split_every_section
 from estimation.diagnosis.causes.single import single_causes, start_tails
 from estimation.diagnosis.causes.unmerge import missing_modes, resolved_points
+from estimation.diagnosis.verdict import explains, misfit_sentence
+from estimation.diagnosis.group_drift import group_drift
 from estimation.diagnosis.context import (MAX_BASELINE_RMS, NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR,
     UNMERGE_ABOVE_FLOOR, Context, log)
 
@@ -243,6 +253,13 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
              + (": " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in moved[:6]) if moved else ""), progress)
     log(f"noise floor {floor['cost']:.3g} (noise RMS "
          + ", ".join(f"{k} {100 * v:.2g} %" for k, v in floor["per_response"].items()) + ")", progress)
+    # ---- a whole group of values off the design by one factor (all capacitances to ground x1.5): drift of the group
+    # (:mod:`.group_drift`), sought from the baseline; it is the answer when its BIC (the factor one parameter) is
+    # below every single cause's, measured after them
+    group = None
+    if prior is not None and not ctx.explained(baseline):
+        group = group_drift(ctx, baseline, lambda m: log(m, progress))
+    group_entry = None
 
     # ---- single causes; a candidate's circuit values may fit better than the baseline's own optimum: then the
     # baseline adopts them and every cause is fitted again from it (at most twice)
@@ -265,22 +282,40 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         if not moved or explained or attempt == 2:
             break
         log("causes fitted again from the refitted baseline", progress)
-    # ---- one-port data that no single cause explains, far above the noise or fitted only by distorted values: every
-    # seed of every split of the design (the picked seeds of a split whose values are all 10 % off stay far above)
+    if group is not None:
+        g_bic = group[0].bic + np.log(group[0].n_residuals)
+        rival = min(results.values(), key=lambda r: r.bic) if results else None
+        if rival is None or g_bic < rival.bic:
+            log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: BIC below every single cause's"
+                + (f" ({rival.cause}: {rival.bic - g_bic:.1f} higher)" if rival else "") + ": the group's drift "
+                "explains the data, no cause", progress)
+            baseline, prior, group_entry = group
+            ctx.prior = prior
+            failed += [{"cause": c, "cost": r.cost, "reason": "the drift of a group explains the data with a lower BIC"}
+                       for c, r in results.items()]
+            results, passes = {}, 0
+        else:
+            log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {rival.cause} has a BIC lower by {g_bic - rival.bic:.1f}:"
+                " not reported", progress)
+    # ---- one-port data that no single cause explains, above the noise or fitted only by distorted values: every
+    # section split, from the fitted values and (distorted values) from the design's
     if (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes
-            and (baseline.cost > UNMERGE_ABOVE_FLOOR * floor["cost"] or ctx.distorted(baseline))
+            and (ctx.unfit(baseline) or ctx.distorted(baseline))
             and not any(ctx.explained(r) for r in results.values())):
         t = time.perf_counter()
-        ctx.wide_unmerge = True
-        try:
-            wide = fit_missing_section(ctx, baseline, [], must_beat=baseline.objective)
-        except _CANDIDATE_FAILURES:
-            wide = None
-        if wide is not None and wide.objective < min(baseline.objective, results["missing-section"].objective
-                                                     if "missing-section" in results else np.inf):
+        # every section of the fitted model split, from several starts each (:func:`.section_fits.split_every_section`)
+        log("missing-section: every section of the fitted model made two", progress)
+        wide = split_every_section(ctx, baseline, configuration_ports(configs))
+        if (wide is None or not ctx.explained(wide)) and ctx.distorted(baseline):  # and the design's sections split
+            log("missing-section: every section of the design made two", progress)
+            other = split_every_section(ctx, baseline, configuration_ports(configs), from_design=True)
+            if other is not None and (wide is None or ctx.penalised(other) < ctx.penalised(wide)):
+                wide = other
+        if wide is not None and wide.objective < baseline.objective and ctx.penalised(wide) < (
+                ctx.penalised(results["missing-section"]) if "missing-section" in results else np.inf):
             results["missing-section"] = wide
             failed = [x for x in failed if x["cause"] != "missing-section"]
-            log(f"missing-section (every seed of every split): {wide.structure}: cost {wide.cost:.4g}, gain "
+            log(f"missing-section (every split): {wide.structure}: cost {wide.cost:.4g}, gain "
                  f"{1 - wide.cost / baseline.cost:.3f}, dBIC {baseline.bic - wide.bic:.1f} "
                  f"({time.perf_counter() - t:.1f} s)", progress)
     for cause in list(results):
@@ -290,10 +325,23 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
 
     # ---- pairs: a missing section and a continuous effect fitted together, when no single cause is enough
     pool = dict(results)
-    if ("missing-section" in todo and max_causes >= 2 and baseline.cost > UNMERGE_ABOVE_FLOOR * floor["cost"]
+    if ("missing-section" in todo and max_causes >= 2 and ctx.unfit(baseline)
             and not any(significant(baseline.bic, baseline.objective, r.bic, r.objective, min_delta_bic, min_gain)
                         for r in results.values())):
         pool.update(section_pairs(ctx, results, baseline))
+        # one-port data: every section split beside the effect that does best alone (its parameters free too)
+        effects_alone = [r for c, r in results.items() if c not in STRUCTURAL and r.effects and r.bic < baseline.bic]
+        if ctx.one_port and ctx.nominal is not None and effects_alone:
+            single = min(effects_alone, key=lambda r: r.bic)
+            t = time.perf_counter()
+            log(f"missing-section: every section split beside {single.cause}", progress)
+            pair = split_every_section(ctx, single, configuration_ports(configs), from_design=ctx.distorted(single))
+            if pair is not None and pair.objective < min([single.objective] + [r.objective for c, r in pool.items()
+                                                                                if c == pair.cause]):
+                pool[pair.cause] = pair
+                log(f"pair {pair.cause} (every split): {pair.structure}: cost {pair.cost:.4g}, gain "
+                    f"{1 - pair.objective / baseline.objective:.3f}, dBIC {baseline.bic - pair.bic:.1f} "
+                    f"({time.perf_counter() - t:.1f} s)", progress)
 
     # ---- forward selection, then a backward check; a section named with other causes is checked against the
     # selection without it (a section's free values take a share of any effect, and a greedy first step that names
@@ -335,19 +383,32 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                      noise=floor, failed=failed)
     final = extended or baseline
     diag.tolerance = float(tolerance) if prior is not None else float("inf")
-    diag.drift = relaxed_drift(ctx, final, lambda m: log(m, progress))
+    diag.drift = ([group_entry] if group_entry else []) + relaxed_drift(ctx, final, lambda m: log(m, progress))
     diag.baseline_drift = with_parallel(baseline.circuit, baseline.values, prior.design, ctx.drift(baseline)) \
         if prior is not None else []
     diag.drift_alternatives = list(getattr(final, "drift_alternatives", []))
     if diag.drift:
         log("values beyond the design tolerance in the final model: "
-             + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift),
+             + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift
+                         if not d.get("group")),
              progress)
         for d in diag.drift:
             if d.get("parallel"):
                 log(parallel_note(d), progress)
-    diag.unexplained = unexplained_bands(f, {n: e * weights[n] if n in weights else e for n, e in final.errors.items()},
-                                         floor["per_response"])
+    final_errors = {n: e * weights[n] if n in weights else e for n, e in final.errors.items()}
+    diag.unexplained = unexplained_bands(f, final_errors, floor["per_response"])
+    # ``none`` is a finding only when the returned model fits (:mod:`.verdict`): else ``unexplained``, with where the
+    # misfit sits, its shape and the best candidate tried
+    diag.explained = explains(final.cost, floor["cost"], ())
+    if not diag.explained:
+        diag.misfit = misfit_sentence(f, final_errors, data, diag.unexplained, final.cost, floor["cost"])
+        tried = [r for r in cands if r is not extended]
+        diag.best_tried = min(tried, key=lambda r: r.bic).cause if tried else ""
+        if not chosen:
+            diag.cause = "unexplained"
+        log(("unexplained: " if not chosen else f"{', '.join(chosen)} leave{'s' if len(chosen) == 1 else ''} a misfit: ")
+            + diag.misfit
+            + (f" Best candidate tried: {diag.best_tried}." if diag.best_tried else ""), progress)
     diag.evidence = {
         "baseline_model": model.name,
         "localisation": localise(f, data, baseline.errors),
@@ -393,8 +454,13 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
             # a model that reaches the noise only by moving values far off the design is no explanation: against it, a
             # candidate that reaches the noise within the design, or with fewer values far off (a value really off the
             # design stays off in every model), needs the BIC margin but no share of the cost
+            # (the count not for a structural candidate: a new section frees the values of the section it touches
+            # from the prior, so it has fewer values off the design by construction; a split is measured with its
+            # halves merged back against the design's section, :meth:`.context.Context.drift`)
+            structural = any(c in STRUCTURAL for c in best.causes)
             if ctx.distorted(current) and (ctx.explained(best) or (
-                    best.objective <= NOISE_MARGIN * ctx.floor and len(ctx.gross(best)) < len(ctx.gross(current)))):
+                    not structural and best.objective <= NOISE_MARGIN * ctx.floor
+                    and len(ctx.gross(best)) < len(ctx.gross(current)))):
                 need = 0.0
             if not significant(current.bic, current.objective, best.bic, best.objective, min_delta_bic, need):
                 break

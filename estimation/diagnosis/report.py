@@ -91,7 +91,9 @@ def drift_lines(data: dict) -> list[str]:
         lines += [f"Values the final model moved beyond the design tolerance ({tol:.0%}): the design value is wrong, "
                   "or the model lacks an effect these values absorb.", "",
                   "| value | design | fitted | ratio |", "|---|---|---|---|"]
-        lines += [f"| {d['name']} | {_fmt(d['design'])} | {_fmt(d['fitted'])} | {d['ratio']:.3g} |" for d in drift]
+        lines += [f"| {d['name']}: {', '.join(d['members'])} | each its design | each x{d['ratio']:.3g} | {d['ratio']:.3g} |"
+                  if d.get("group") else f"| {d['name']} | {_fmt(d['design'])} | {_fmt(d['fitted'])} | {d['ratio']:.3g} |"
+                  for d in drift]
         lines.append("")
         lines += [parallel_note(d) + "." for d in drift if d.get("parallel")]
         if any(d.get("parallel") for d in drift):
@@ -148,6 +150,15 @@ def write_report(diag: Diagnosis, directory: str | Path, source: str = "") -> Pa
               f"{_fmt(diag.noise.get('cost', 0.0))}. Selection: {ev.get('criterion', '')}.", ""]
     if data.get("causes") and len(data["causes"]) > 1:
         lines += ["Causes named, in order: " + ", ".join(f"`{c}`" for c in data["causes"]) + ".", ""]
+    if not data.get("explained", True):
+        lines += [("No cause tried explains the data" if not data.get("causes") else "The causes named do not explain "
+                   "all of the data") + f": the returned model stays above twice the noise floor. {data.get('misfit', '')}"
+                  + (f" Best candidate tried: `{data['best_tried']}`." if data.get("best_tried") else ""), ""]
+        if data.get("unexplained"):
+            lines += ["| response | band (Hz) | RMS / noise | mag dB / phase deg |", "|---|---|---|---|"]
+            lines += [f"| {b['response']} | {_fmt(b['band_hz'][0])} - {_fmt(b['band_hz'][1])} | {b['above_noise']:.3g} | "
+                      f"{b['mag_rms_db']:.2f} / {b['phase_rms_deg']:.2f} |" for b in data["unexplained"]]
+            lines.append("")
     lines += drift_lines(data)
     loc = ev.get("localisation", {})
     if loc:

@@ -50,6 +50,12 @@ class Diagnosis(DiagnosisOutcome):
     #: Other values off the design that explain the data as well as the one reported (:func:`.drift.located_drift`).
     drift_alternatives: list[dict[str, Any]] = field(default_factory=list)
     tolerance: float = float("inf")
+    #: The returned model fits within :data:`.verdict.FIT_FACTOR` times the noise floor (:mod:`.verdict`).
+    explained: bool = True
+    #: Where the misfit of a model that does not explain the data sits and its shape (:func:`.verdict.misfit_sentence`).
+    misfit: str = ""
+    #: The candidate with the lowest BIC among those tried, for a diagnosis that does not explain the data.
+    best_tried: str = ""
 
     @property
     def gain(self) -> float:
@@ -90,6 +96,9 @@ class Diagnosis(DiagnosisOutcome):
             "noise_floor": self.noise.get("cost", 0.0),
             "noise": self.noise,
             "unexplained": self.unexplained,
+            "explained": self.explained,
+            "misfit": self.misfit,
+            "best_tried": self.best_tried,
             "failed": self.failed,
             "baseline_bic": self.baseline.bic,
             "fitted_extension": ext.describe() if ext else [],

@@ -13,13 +13,12 @@ from typing import Any
 import numpy as np
 
 from estimation.diagnosis.causes.catalogue import Effect
-from estimation.diagnosis.context import (NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR, UNMERGE_ABOVE_FLOOR,
-    WIDE_SEED_NFEV, Context, log)
+from estimation.diagnosis.context import NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR, WIDE_SEED_NFEV, Context, log
 from estimation.diagnosis.cores import shared_map
 from estimation.diagnosis.fit import (CANDIDATE_FAILURES, WIDE_CONTINUATION, WIDER_CONTINUATION, FitResult,
     FrequencyFit, configuration_ports, current_nc)
 from estimation.diagnosis.causes.sections import section_candidates
-from estimation.diagnosis.causes.unmerge import missing_modes, search_unmerged
+from estimation.diagnosis.causes.unmerge import Unmerged, missing_modes, search_unmerged
 
 
 def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect], must_beat: float,
@@ -54,20 +53,25 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
         except CANDIDATE_FAILURES:
             continue
         res.structure = cand.how
+        if cand.split_of is not None:  # its halves merged back are held to the design's section (:meth:`.Context.drift`)
+            try:
+                res.unmerged = Unmerged(*cand.split_of)
+            except CANDIDATE_FAILURES:
+                pass
         res.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"] if effects else \
             ["missing-section"]
         res.cause = "+".join(res.causes)
-        if best is None or res.objective < best.objective:
+        if best is None or ctx.penalised(res) < ctx.penalised(best):
             best = res
     # a missing section alone (no cause named yet): the design's sections split with their couplings free
-    if not effects and ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor
+    if not effects and ctx.nominal is not None and (ctx.unfit(base)
                                                     or ctx.distorted(base)):
         split = _split_nominal(ctx, effects, tail, ports)
-        if split is not None and (best is None or split.objective < best.objective):
+        if split is not None and (best is None or ctx.penalised(split) < ctx.penalised(best)):
             best = split
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
-    if ctx.nominal is not None and (base.cost > UNMERGE_ABOVE_FLOOR * ctx.floor or ctx.distorted(base)
+    if ctx.nominal is not None and (ctx.unfit(base) or ctx.distorted(base)
                                     or missing_modes(ctx.f, ctx.data, base.predicted, ctx.resolved) > 0):
         wide = ctx.wide_unmerge and not effects and ctx.one_port
         found = ctx.unmerge_cache.get("wide") if wide else None
@@ -78,10 +82,13 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
                                     good_enough=NOISE_MARGIN * STRUCTURAL_FLOOR * ctx.floor)
             if wide:
                 ctx.unmerge_cache["wide"] = found
-        if found is not None and (best is None or found[0].objective < best.objective):
+        if found is not None:
+            found[0].unmerged = found[1]
+        if found is not None and (best is None or ctx.penalised(found[0]) < ctx.penalised(best)):
             best, um, merged = found
             best.structure = um.candidate.how
             best.merged_back = {**merged.values, **um.merged_back(merged.fitted_circuit())}
+            best.unmerged = um
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
     return best
@@ -168,3 +175,61 @@ def section_pairs(ctx: Context, results: dict[str, FitResult], baseline: FitResu
         log(f"pair {pair.cause}: cost {pair.cost:.4g}, gain {1 - pair.objective / baseline.objective:.3f}, "
              f"dBIC {baseline.bic - pair.bic:.1f} ({time.perf_counter() - t:.1f} s)", ctx.progress)
     return pairs
+
+
+#: Random starts of each split's multistart fit (:func:`split_every_section`; the baseline's own fit uses
+#: :data:`.baseline.BASELINE_STARTS`): half of them, as the split starts from a fitted model, not from the design.
+SPLIT_STARTS = 8
+#: Seeds of each split (:meth:`.unmerge.Unmerged.seeds`, ranked by their cost) fitted through smoothed errors.
+SPLIT_SEEDS = 3
+
+
+def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], from_design: bool = False
+                        ) -> FitResult | None:
+    """Every section of the fitted model made two whole sections, each fitted from several starts; the best.
+
+    With effects in ``base`` (a cause named or fitted alone) they stay in every fit, their parameters free. With
+    ``from_design`` the sections of the design (the nominal circuit) are split instead of the fitted model's: a
+    baseline that reached the data only with values far off the design has absorbed the missing section in them.
+
+    For each section ``j`` of each winding the split of :class:`.unmerge.Unmerged` (two sections in series, the
+    inductance and the series capacitance shared between them, the new node with its own capacitance to ground)
+    is built from the *fitted* model's values, with the couplings of the two new inductors free (the coupling
+    partition of the split). Its ``SPLIT_SEEDS`` best seeds (by cost) are fitted through smoothed errors, and from
+    the best of them the values are fitted again from ``SPLIT_STARTS`` random starts around it, as the baseline is
+    (:func:`.baseline.fit_multistart`): the equal halves of a split are a saddle of the split model, and the seeds'
+    partitions are a few points of a space the random starts sample more widely. Every section of every winding is
+    tried, so the search does not depend on where the misfit seemed to sit.
+    """
+    from estimation.diagnosis.baseline import fit_multistart
+    from estimation.diagnosis.causes.sections import find_chains
+
+    circuit = ctx.nominal if from_design and ctx.nominal is not None else base.fitted_circuit()
+    effects = list(base.effects)
+    tail = base.x[current_nc(base):]
+    best = None
+    for ch in find_chains(circuit, ports):
+        for j in range(len(ch.sections)):
+            t = time.perf_counter()
+            try:
+                um = Unmerged(circuit, ch, j)
+                pair = {um.first["L"].lower(), um.second["L"].lower()}
+                ks = [e.name for e in um.candidate.circuit.of_kind("K") if {n.lower() for n in e.nodes} & pair]
+                fit = ctx.fit(um.candidate.circuit, effects, couplings=ks)
+                rows = um.seeds(fit.free, tail)
+                r = fit.residuals_batch(rows)
+                order = np.argsort(np.sum(r * r, axis=1))[:SPLIT_SEEDS]
+                seeded = min((fit.fit_continued(rows[i], max_nfev=100) for i in order), key=lambda x: x.objective)
+                again = ctx.fit(seeded.fitted_circuit(), effects, couplings=ks)
+                res = fit_multistart(again, starts=SPLIT_STARTS, good_enough=NOISE_MARGIN * ctx.floor,
+                                     x0=np.concatenate([np.zeros(again.nc), seeded.x[again.nc:]]))
+            except CANDIDATE_FAILURES:
+                continue
+            res.structure = um.candidate.how + (" (from the design values)" if from_design else "")
+            res.unmerged = um
+            res.causes = [c for c in base.causes if c not in ("none", "missing-section")] + ["missing-section"]
+            res.cause = "+".join(res.causes)
+            log(f"  {um.candidate.how}: cost {res.cost:.4g} ({time.perf_counter() - t:.1f} s)", ctx.progress)
+            if best is None or ctx.penalised(res) < ctx.penalised(best):
+                best = res
+    return best

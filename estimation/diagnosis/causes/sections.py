@@ -30,6 +30,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -220,6 +221,8 @@ class SectionCandidate:
     port: str = ""
     #: K elements whose coupling the change touches (fitted with the new elements).
     couplings: list[str] = field(default_factory=list)
+    #: A split: the circuit, chain and section index it splits (so its halves can be merged back, :mod:`.unmerge`).
+    split_of: tuple[Any, ...] | None = None
 
 
 #: Couplings at least this tight are freed by a new section (:func:`touched_couplings`).
@@ -383,7 +386,9 @@ def section_candidates(circuit: Circuit, ports: Sequence[str], grid: Sequence[fl
     for ch in chains:
         for j in range(len(ch.sections)):
             for shunt in (0.01, 1.0):
-                out.append(split_section(circuit, ch, j, rho, shunt))
+                cand = split_section(circuit, ch, j, rho, shunt)
+                cand.split_of = (circuit, ch, j)
+                out.append(cand)
         for at in ("port", "end"):
             for g in grid:
                 out.append(add_section(circuit, ch, at, rho, l_scale=g, c_scale=1.0 / g))

@@ -1,0 +1,246 @@
+"""Broad diagnosis cases written from physics: a winding cascade solved by its own nodal equations.
+
+Nothing here is imported from pris-cosim: the cascade's modified nodal
+equations (node voltages and inductor currents, the inductance matrix with
+couplings), the effects and the file writers are written out below, so a
+diagnosis checked against these cases is checked against other code.
+
+A draw (:func:`draw`) is a winding of 3-10 sections: inductances, series
+resistances, series and ground capacitances drawn per section, couplings
+``k_ij = rho^|i-j|`` with a random decay ``rho`` (a Kac-Murdock-Szego matrix,
+positive definite for ``|rho| < 1``). Its design netlist is the truth with
+every value moved within 10 % (a tolerance of 20 % covers it), on a grid from
+100 Hz-10 kHz to 1-10 MHz with 200-1000 points, complex noise of 0.1-2 %
+(RMS of ``ln H``), written as CSV or Touchstone ``.s1p``. The hidden effect
+(``EFFECTS``) is one of:
+
+``none``
+    nothing (truth: no cause, no drift).
+``skin``
+    every section's resistance replaced by a round conductor's internal
+    impedance ``R_dc (x/2) J0(x)/J1(x)``, ``x = (1 - j) a / delta``
+    (truth: ``skin-effect``).
+``coreloss``
+    the inductance matrix times a lamination's ``tanh(q)/q``,
+    ``q = (1 + j) d / (2 delta_core)`` (truth: ``core-loss``).
+``cg_scale``
+    every capacitance to ground times 1.4-1.8 (truth: drift of the group).
+``local``
+    one capacitance to ground or one series capacitance times 1.8-3 (truth:
+    drift of that value).
+``split``
+    one section made two, the inductance shared 35-65 %, the series
+    capacitance split, a new node with its own capacitance to ground and
+    couplings continuing the decay (truth: ``missing-section``).
+``beyond``
+    one resistance or inductance moved 1.6-2.5x (truth: drift of that value).
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.special import jve
+
+EFFECTS = ("none", "skin", "coreloss", "cg_scale", "local", "split", "beyond")
+TRUTH_CAUSES = {"skin": ["skin-effect"], "coreloss": ["core-loss"], "split": ["missing-section"]}
+
+
+@dataclass
+class Winding:
+    """A cascade: section ``i`` joins node ``i`` to node ``i + 1`` (the last to ground); node 0 is the port."""
+
+    R: np.ndarray
+    L: np.ndarray
+    Cs: np.ndarray
+    Cg: np.ndarray
+    K: np.ndarray  # coupling coefficients, ones on the diagonal
+
+    @property
+    def n(self) -> int:
+        return self.R.size
+
+    def inductance(self) -> np.ndarray:
+        s = np.sqrt(self.L)
+        return self.K * np.outer(s, s)
+
+
+def zin(w: Winding, f: np.ndarray, r_of_f=None, l_factor=None) -> np.ndarray:
+    """Driving-point impedance at node 0 (Ohm): one modified nodal solve per frequency.
+
+    ``r_of_f(f) -> (n,)`` complex series impedances replacing ``R``; ``l_factor(f)`` a complex factor on the
+    inductance matrix.
+    """
+    n = w.n
+    Lm = w.inductance()
+    out = np.empty(f.size, complex)
+    A = np.zeros((n, n))  # node-branch incidence: branch i leaves node i, enters node i+1 (ground past the last)
+    for i in range(n):
+        A[i, i] = 1.0
+        if i + 1 < n:
+            A[i + 1, i] = -1.0
+    for m, fk in enumerate(f):
+        s = 2j * np.pi * fk
+        Y = np.zeros((n, n), complex)
+        for i in range(n):
+            Y[i, i] += s * w.Cg[i]
+            a, b = i, i + 1
+            Y[a, a] += s * w.Cs[i]
+            if b < n:
+                Y[b, b] += s * w.Cs[i]
+                Y[a, b] -= s * w.Cs[i]
+                Y[b, a] -= s * w.Cs[i]
+        Zb = np.diag(r_of_f(fk) if r_of_f else w.R.astype(complex)) + s * Lm * (l_factor(fk) if l_factor else 1.0)
+        M = np.block([[Y, A], [A.T, -Zb]])
+        rhs = np.zeros(2 * n, complex)
+        rhs[0] = 1.0
+        out[m] = np.linalg.solve(M, rhs)[0]
+    return out
+
+
+def skin_impedance(R: np.ndarray, f_skin: float):
+    """Round conductor: ``Z = R_dc (x/2) J0(x)/J1(x)``, ``x = (1 - j) a / delta``, ``a = delta`` at ``f_skin``."""
+    def z(fk: float) -> np.ndarray:
+        x = (1 - 1j) * np.sqrt(fk / f_skin)
+        return R * (x / 2) * jve(0, x) / jve(1, x)  # the exponential scalings of jve cancel in the ratio
+    return z
+
+
+def lamination_factor(f_core: float):
+    """Lamination: ``tanh(q)/q``, ``q = (1 + j) d / (2 delta)``, ``d = delta`` at ``f_core``."""
+    def g(fk: float) -> complex:
+        q = (1 + 1j) * 0.5 * np.sqrt(fk / f_core)
+        return complex(np.tanh(q) / q)
+    return g
+
+
+@dataclass
+class Case:
+    name: str
+    effect: str
+    frequency_hz: np.ndarray
+    z: np.ndarray
+    netlist: str
+    port: str
+    causes: list[str]
+    drift: list[str] | None
+    noise: float
+    fmt: str
+    extra: dict = field(default_factory=dict)
+
+
+def _netlist(w: Winding, title: str) -> str:
+    lines = [f"* {title}"]
+    n = w.n
+    node = lambda i: "0" if i >= n else f"n{i + 1}"  # noqa: E731
+    for i in range(n):
+        lines += [f"R{i + 1} {node(i)} x{i + 1} {w.R[i]:.6g}", f"L{i + 1} x{i + 1} {node(i + 1)} {w.L[i]:.6g}",
+                  f"C{i + 1} {node(i)} {node(i + 1)} {w.Cs[i]:.6g}"]
+    lines += [f"Cg{i + 1} {node(i)} 0 {w.Cg[i]:.6g}" for i in range(n)]
+    lines += [f"K{i + 1}_{j + 1} L{i + 1} L{j + 1} {w.K[i, j]:.6g}" for i in range(n) for j in range(i + 1, n)]
+    return "\n".join(lines) + "\n"
+
+
+def _random_winding(rng: np.random.Generator, n: int) -> Winding:
+    rho = rng.uniform(0.45, 0.9)
+    idx = np.arange(n)
+    return Winding(R=rng.uniform(0.2, 1.0, n), L=rng.uniform(1e-3, 5e-3, n), Cs=rng.uniform(0.3e-9, 2e-9, n),
+                   Cg=rng.uniform(0.3e-9, 2e-9, n), K=rho ** np.abs(idx[:, None] - idx[None, :]))
+
+
+def _split(w: Winding, j: int, a: float, rng: np.random.Generator) -> Winding:
+    """Section ``j`` as two: inductance shares ``a``, ``1 - a`` (with their mutual), a new node with its own Cg."""
+    n = w.n
+    rho = float(w.K[0, 1]) if n > 1 else 0.7
+    keep = 1 + 2 * rho * np.sqrt(a * (1 - a))  # the two halves with their mutual keep the section's inductance
+    L1, L2 = w.L[j] * a / keep, w.L[j] * (1 - a) / keep
+    R = np.insert(w.R, j + 1, w.R[j] * (1 - a))
+    R[j] = w.R[j] * a
+    L = np.insert(w.L, j + 1, L2)
+    L[j] = L1
+    Cs = np.insert(w.Cs, j + 1, w.Cs[j] * rng.uniform(1.5, 2.5))
+    Cs[j] = w.Cs[j] * rng.uniform(1.5, 2.5)
+    Cg = np.insert(w.Cg, j + 1, w.Cg[j] * rng.uniform(0.5, 1.0))
+    idx = np.arange(n + 1)
+    K = rho ** np.abs(idx[:, None] - idx[None, :])
+    return Winding(R, L, Cs, Cg, K)
+
+
+def draw(seed: int, effect: str | None = None, points: int | None = None) -> Case:
+    """One case from ``seed`` (the effect drawn from ``EFFECTS`` unless given; ``points`` replaces the drawn number
+    of frequencies, the rest of the draw unchanged)."""
+    rng = np.random.default_rng(seed)
+    effect = effect or EFFECTS[int(rng.integers(len(EFFECTS)))]
+    n = int(rng.integers(3, 11))
+    truth = _random_winding(rng, n)
+    lo, hi, n_f = rng.uniform(2, 4), rng.uniform(6, 7), int(rng.integers(200, 1001))
+    f = np.logspace(lo, hi, points or n_f)
+    noise = float(np.exp(rng.uniform(np.log(1e-3), np.log(2e-2))))
+    design = Winding(*(v * rng.uniform(0.9, 1.1, v.shape) for v in (truth.R, truth.L, truth.Cs, truth.Cg)),
+                     K=truth.K.copy())
+    causes, drift, r_of_f, l_factor, extra = TRUTH_CAUSES.get(effect, []), [], None, None, {}
+    if effect == "skin":
+        extra["f_skin"] = float(10 ** rng.uniform(np.log10(f[0]) + 1, 5.5))
+        r_of_f = skin_impedance(truth.R, extra["f_skin"])
+    elif effect == "coreloss":
+        extra["f_core"] = float(10 ** rng.uniform(3.5, 5))
+        l_factor = lamination_factor(extra["f_core"])
+    elif effect == "cg_scale":
+        truth.Cg = truth.Cg * rng.uniform(1.4, 1.8)
+        drift = [f"Cg{i + 1}" for i in range(n)]
+    elif effect == "local":
+        i = int(rng.integers(n))
+        which = "Cg" if rng.random() < 0.5 else "C"
+        arr = truth.Cg if which == "Cg" else truth.Cs
+        arr[i] *= rng.uniform(1.8, 3.0)
+        drift = [f"{which}{i + 1}"]
+    elif effect == "beyond":
+        i = int(rng.integers(n))
+        which = "R" if rng.random() < 0.5 else "L"
+        arr = truth.R if which == "R" else truth.L
+        arr[i] *= rng.uniform(1.6, 2.5) ** (1 if rng.random() < 0.5 else -1)
+        drift = [f"{which}{i + 1}"]
+    elif effect == "split":
+        j = int(rng.integers(n))
+        extra["split"] = j + 1
+        truth = _split(truth, j, rng.uniform(0.35, 0.65), rng)
+        drift = None
+    z = zin(truth, f, r_of_f, l_factor)
+    z = z * np.exp(noise / np.sqrt(2) * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)))
+    fmt = "s1p" if rng.random() < 0.3 else "csv"
+    return Case(f"broad_{seed}_{effect}", effect, f, z, _netlist(design, f"design, {n} sections"), "n1", causes,
+                None if effect in ("skin", "coreloss", "split") else drift, noise, fmt, extra)
+
+
+def write(case: Case, directory: Path) -> tuple[Path, Path]:
+    """The measured file (CSV ``frequency_hz,Zin_mag,Zin_phase_deg`` or a Touchstone ``.s1p`` in 50 Ohm RI) and
+    the design netlist."""
+    directory.mkdir(parents=True, exist_ok=True)
+    net = directory / f"{case.name}.cir"
+    net.write_text(case.netlist)
+    if case.fmt == "csv":
+        data = directory / f"{case.name}.csv"
+        rows = np.column_stack([case.frequency_hz, np.abs(case.z), np.degrees(np.angle(case.z))])
+        np.savetxt(data, rows, delimiter=",", header="frequency_hz,Zin_mag,Zin_phase_deg", comments="", fmt="%.9e")
+    else:
+        data = directory / f"{case.name}.s1p"
+        s = (case.z - 50.0) / (case.z + 50.0)
+        lines = ["! one-port reflection of a winding, independent nodal solver", "# Hz S RI R 50"]
+        lines += [f"{fk:.9e} {v.real:.12e} {v.imag:.12e}" for fk, v in zip(case.frequency_hz, s)]
+        data.write_text("\n".join(lines) + "\n")
+    return data, net
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description="write broad cases (seed effect pairs) to a folder")
+    ap.add_argument("out")
+    ap.add_argument("seeds", nargs="+", type=int)
+    ap.add_argument("--effect", choices=EFFECTS)
+    a = ap.parse_args()
+    for sd in a.seeds:
+        c = draw(sd, a.effect)
+        d, n = write(c, Path(a.out))
+        print(c.name, d, n, c.causes, c.drift, f"{c.noise:.3%}", c.frequency_hz.size)

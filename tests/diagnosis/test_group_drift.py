@@ -1,0 +1,76 @@
+"""Drift of a whole group: every capacitance to ground of a winding at twice its design is one drift, not a cause.
+
+The data come from a small nodal solver written here (node voltages and
+inductor currents of a coupled R-L-C cascade), which shares nothing with the
+diagnosis.
+"""
+
+import numpy as np
+import pytest
+
+from estimation.diagnosis import diagnose_frequency
+from estimation.diagnosis.group_drift import value_groups
+from estimation.diagnosis.prior import design_prior
+from pris_cosim.circuits.netlist import parse_netlist
+
+R = np.array([0.4, 0.5, 0.45])
+L = np.array([3e-3, 2.5e-3, 3.5e-3])
+CS = np.array([0.8e-9, 1.1e-9, 0.9e-9])
+CG = np.array([0.6e-9, 1.0e-9, 1.2e-9])
+RHO = 0.7
+
+
+def _zin(f, R, L, Cs, Cg, rho):
+    n = R.size
+    K = rho ** np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    Lm = K * np.sqrt(np.outer(L, L))
+    A = np.eye(n) - np.eye(n, k=-1)  # branch i from node i to node i+1 (ground past the last)
+    out = []
+    for fk in f:
+        s = 2j * np.pi * fk
+        Y = np.diag(s * Cg).astype(complex)
+        for i in range(n):
+            Y[i, i] += s * Cs[i]
+            if i + 1 < n:
+                Y[i + 1, i + 1] += s * Cs[i]
+                Y[i, i + 1] -= s * Cs[i]
+                Y[i + 1, i] -= s * Cs[i]
+        M = np.block([[Y, A], [A.T, -(np.diag(R) + s * Lm)]])
+        rhs = np.zeros(2 * n, complex)
+        rhs[0] = 1
+        out.append(np.linalg.solve(M, rhs)[0])
+    return np.array(out)
+
+
+def _netlist(R, L, Cs, Cg, rho):
+    n = R.size
+    node = lambda i: "0" if i >= n else f"n{i + 1}"  # noqa: E731
+    lines = ["* design"]
+    for i in range(n):
+        lines += [f"R{i + 1} {node(i)} x{i + 1} {R[i]}", f"L{i + 1} x{i + 1} {node(i + 1)} {L[i]}",
+                  f"C{i + 1} {node(i)} {node(i + 1)} {Cs[i]}", f"Cg{i + 1} {node(i)} 0 {Cg[i]}"]
+    lines += [f"K{i + 1}{j + 1} L{i + 1} L{j + 1} {rho ** (j - i)}" for i in range(n) for j in range(i + 1, n)]
+    return parse_netlist("\n".join(lines) + "\n")
+
+
+def test_groups_by_role():
+    net = _netlist(R, L, CS, CG, RHO)
+    prior = design_prior({e.name: float(e.value) for e in net.elements if e.kind in "RLC"}, 0.2, 1e-5, 100, 1, net)
+    groups = value_groups(prior, net, ["n1"])
+    # C3 ends at ground beside Cg3: one value to the data, in the group of the capacitances to ground
+    assert groups == {"Cg": ["Cg1", "Cg2", "C3", "Cg3"], "L": ["L1", "L2", "L3"], "R": ["R1", "R2", "R3"]}
+
+
+@pytest.mark.slow
+def test_all_ground_capacitances_scaled_are_one_group_drift():
+    rng = np.random.default_rng(3)
+    f = np.logspace(3, 6.5, 300)
+    truth = [v * rng.uniform(0.93, 1.07, v.size) for v in (R, L, CS, CG)]
+    z = _zin(f, truth[0], truth[1], truth[2], truth[3] * 2.0, RHO)
+    z = z * np.exp(0.003 / np.sqrt(2) * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)))
+    d = diagnose_frequency(f, {"Zin": z}, circuit=_netlist(R, L, CS, CG, RHO), port="n1", progress=False)
+    assert d.causes == [], (d.cause, d.candidates())
+    group = [x for x in d.drift if x.get("group")]
+    assert group and group[0]["members"] == ["Cg1", "Cg2", "C3", "Cg3"] and group[0]["in_parallel"] == ["C3", "Cg3"]
+    assert 1.5 < group[0]["ratio"] < 2.3, d.drift  # (C3, in parallel with Cg3 and not scaled, in the mean)
+    assert d.explained
