@@ -21,6 +21,7 @@ def _diagnose(causes, seed, **kw):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_skin_effect_and_core_loss_named_together_without_drift():
     """The baseline alone moves values up to 100x; the second cause is refitted from the design values."""
     case, d = _diagnose(("skin-effect", "core-loss"), 700)
@@ -44,6 +45,7 @@ def test_missing_section_named_against_the_design():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_missing_section_found_when_the_design_stays_far_above_the_noise():
     """Two merged sections at the port; the design fits no better than 250x the noise. The split is found only by
     fitting its seeds through errors smoothed from a decade down (the seeds' resonances are tens of per cent off)."""

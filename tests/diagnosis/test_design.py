@@ -131,6 +131,7 @@ def test_skin_effect_named_beside_a_doubled_capacitance():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_one_doubled_capacitance_located_where_the_prior_spread_it():
     """An independent generator's design case: C5 of a 6-section winding at twice its design value, nothing else.
 
