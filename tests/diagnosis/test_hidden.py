@@ -24,7 +24,7 @@ def _diagnose(case):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("seed", [pytest.param(1, marks=pytest.mark.long), 2])
 def test_netlist_cascade_skin_effect_is_named(seed):
     """A 4-section netlist cascade whose resistances rise with frequency (real-valued, thesis-like forms)."""
     case = one_port_case("skin-effect", seed, sections=4)

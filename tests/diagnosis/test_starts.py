@@ -25,6 +25,7 @@ def _diagnose(case, **kw):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_undetectable_split_is_none():
     """A 2-section baseline of a 3-section truth that the baseline's structure reproduces within the noise.
 

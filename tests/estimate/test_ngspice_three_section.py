@@ -210,6 +210,7 @@ def test_three_section_10mhz_every_value_within_2pct(records):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 @needs_ngspice
 def test_three_section_1mhz_within_2pct_or_fisher_says_why(records):
     """At 1 MHz the winding's upper modes lie above the Nyquist frequency. Values that the Fisher information
