@@ -432,7 +432,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default="bench-estimate-fmu")
     p.add_argument("--json", action="store_true", help="also print one JSON object with everything")
     a = p.parse_args(argv)
-    out = Path(a.out)
+    out = Path(a.out).resolve()  # configurations name their files by absolute paths
     out.mkdir(parents=True, exist_ok=True)
     if a.ladder:
         return ladder(a, out)
