@@ -128,13 +128,24 @@ def ladder_replay(d: Path, truth: dict[str, float], record: Path) -> dict[str, f
     return scores
 
 
-def ladder_config(d: Path, rec: str, truth: dict[str, float], a: argparse.Namespace) -> dict:
-    """The ``pris-cosim estimate`` configuration of the ladder FMU: six free values, the others set."""
+def ladder_truth(d: Path, rec: str) -> tuple[dict[str, float], tuple[str, ...]]:
+    """The true values of one ladder record and its free values: the ``truth*.json`` that names the record
+    (``"record"``), else ``truth.json`` with :data:`LADDER_FREE`."""
+    for path in sorted(d.glob("truth*.json")):
+        doc = json.loads(path.read_text())
+        if doc.get("record") == rec:
+            return doc["truth"], tuple(doc.get("free", LADDER_FREE))
+    return json.loads((d / "truth.json").read_text())["truth"], LADDER_FREE
+
+
+def ladder_config(d: Path, rec: str, truth: dict[str, float], a: argparse.Namespace,
+                  free: tuple[str, ...] = LADDER_FREE) -> dict:
+    """The ``pris-cosim estimate`` configuration of the ladder FMU: the ``free`` values, the others set."""
     params = {k: {"min": 0.2 * truth[k], "max": min(5 * truth[k], 0.99) if k.startswith("k") else 5 * truth[k]}
-              for k in LADDER_FREE}
+              for k in free}
     cfg = {"fmu": str(d / "ThreeSectionLadder.fmu"), "input": "u_drive", "output": "i_port",
            "outputs": ["v_port"], "parameters": params,
-           "values": {k: v for k, v in truth.items() if k not in LADDER_FREE},
+           "values": {k: v for k, v in truth.items() if k not in free},
            "target": {"kind": "waveforms-csv", "path": str(d / rec), "values": truth}, "seed": 1}
     budget = {k: v for k, v in (("design", a.design), ("restarts", a.restarts), ("simulations", a.simulations))
               if v is not None}
@@ -143,12 +154,13 @@ def ladder_config(d: Path, rec: str, truth: dict[str, float], a: argparse.Namesp
     return cfg
 
 
-def ladder_estimate(a: argparse.Namespace, d: Path, rec: str, truth: dict[str, float], out: Path) -> dict | None:
+def ladder_estimate(a: argparse.Namespace, d: Path, rec: str, truth: dict[str, float], out: Path,
+                    free: tuple[str, ...] = LADDER_FREE) -> dict | None:
     """Run ``pris-cosim estimate`` on one ladder record in a subprocess; its JSON answer, or None on failure."""
     import subprocess
 
     cpath = out / f"ladder-{Path(rec).stem}.json"
-    cpath.write_text(json.dumps(ladder_config(d, rec, truth, a), indent=1))
+    cpath.write_text(json.dumps(ladder_config(d, rec, truth, a, free), indent=1))
     cmd = [sys.executable, "-m", "pris_cosim", "estimate", "--config", str(cpath), "--json",
            "--out", str(out / f"ladder-{Path(rec).stem}")]
     if a.workers:
@@ -308,10 +320,11 @@ def ladder(a: argparse.Namespace, out: Path) -> int:
         return ladder_peers(a, d, truth, out)
     rows, errs_rows, summary = [], [], {}
     for rec in a.records.split(","):
+        truth, free = ladder_truth(d, rec)
         scores = ladder_replay(d, truth, d / rec)
         print(f"== {d.name}/{rec}: truth replay, zero-order hold {scores['zoh']:.3g}, linear {scores['linear']:.3g} "
               "of the output RMS", flush=True)
-        res = ladder_estimate(a, d, rec, truth, out)
+        res = ladder_estimate(a, d, rec, truth, out, free)
         if res is None:
             return 1
         worst = res["worst_percent"]
