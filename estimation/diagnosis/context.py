@@ -65,10 +65,6 @@ class Context:
     weights: dict[str, np.ndarray] = field(default_factory=dict)
     #: Points quiet enough to show resonances, by response (:func:`.unmerge.resolved_points`); empty: all.
     resolved: dict[str, np.ndarray] = field(default_factory=dict)
-    #: Every seed of every split fitted (:func:`.unmerge.search_unmerged` ``all_seeds``), for one-port data without
-    #: a cause named; the result does not depend on the baseline, so it is kept.
-    wide_unmerge: bool = False
-    unmerge_cache: dict = field(default_factory=dict)
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
             prior: DesignPrior | None | str = "same", couplings: Sequence[str] = ()) -> FrequencyFit:

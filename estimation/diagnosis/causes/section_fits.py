@@ -73,22 +73,16 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
             best.cause = "+".join(best.causes)
     if ctx.nominal is not None and (ctx.unfit(base) or ctx.distorted(base)
                                     or missing_modes(ctx.f, ctx.data, base.predicted, ctx.resolved) > 0):
-        wide = ctx.wide_unmerge and not effects and ctx.one_port
-        found = ctx.unmerge_cache.get("wide") if wide else None
-        if found is None:
-            found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
-                                    tail, free_couplings=not effects, resolved=ctx.resolved, all_seeds=wide,
-                                    seed_nfev=WIDE_SEED_NFEV, schedules=(WIDE_CONTINUATION, WIDER_CONTINUATION),
-                                    good_enough=NOISE_MARGIN * STRUCTURAL_FLOOR * ctx.floor)
-            if wide:
-                ctx.unmerge_cache["wide"] = found
+        found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
+                                tail, free_couplings=not effects, resolved=ctx.resolved, all_seeds=False,
+                                seed_nfev=WIDE_SEED_NFEV, schedules=(WIDE_CONTINUATION, WIDER_CONTINUATION),
+                                good_enough=NOISE_MARGIN * STRUCTURAL_FLOOR * ctx.floor)
         if found is not None:
-            found[0].unmerged = found[1]
+            found[0].unmerged = found[1]  # ranked with its halves merged back (:meth:`.Context.penalised`)
         if found is not None and (best is None or ctx.penalised(found[0]) < ctx.penalised(best)):
             best, um, merged = found
             best.structure = um.candidate.how
             best.merged_back = {**merged.values, **um.merged_back(merged.fitted_circuit())}
-            best.unmerged = um
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
     return best
