@@ -1,6 +1,6 @@
 """Diagnosis on broad cases drawn from physics by code that shares nothing with it, and its speed.
 
-    python benchmarks/bench_broad.py [--draws N] [--first SEED] [--effect EFFECT] [--speed-only]
+    python benchmarks/bench_broad.py [--draws N] [--first SEED] [--effect EFFECT] [--speed-only] [--out FILE]
 
 Cases: :mod:`broad_cases` (3-10 section windings solved by their own nodal
 equations; skin effect from a round conductor's Bessel solution, core loss
@@ -16,12 +16,17 @@ tolerance equal it (a group's drift: the members of the group reported).
 
 Prints one row per draw, then the share right, the false alarms (a cause
 named on a draw with none), the clean draws with drift reported, and the
-speed target: one 8-section one-port netlist on 500 points.
+speed target: one 8-section one-port netlist on 500 points. With ``--out``
+each draw's row is appended to that JSON-lines file as it finishes, and a
+run started again with the same file skips the draws already in it (a long
+run resumes after an interruption); the table covers every row in the file
+for the seeds asked.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import tempfile
 import time
@@ -83,14 +88,27 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=1000)
     ap.add_argument("--effect", choices=EFFECTS)
     ap.add_argument("--speed-only", action="store_true")
+    ap.add_argument("--out", type=Path, help="JSON-lines file of the draws' rows (appended; resumed from)")
     a = ap.parse_args()
+    done: dict[int, dict] = {}
+    if a.out is not None and a.out.exists():
+        for line in a.out.read_text().splitlines():
+            if line.strip():
+                r = json.loads(line)
+                if a.effect is None or r["effect"] == a.effect:
+                    done[r["seed"]] = r
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         rows = []
         if not a.speed_only:
             print(f"{'seed':>5} {'effect':9} {'n':>2} {'pts':>4} {'noise':>6} fmt | truth | said | drift | gain | s")
             for seed in range(a.first, a.first + a.draws):
-                r = run(seed, a.effect, folder)
+                r = done.get(seed)
+                if r is None:
+                    r = run(seed, a.effect, folder)
+                    if a.out is not None:
+                        with a.out.open("a") as fh:
+                            fh.write(json.dumps(r) + "\n")
                 rows.append(r)
                 print(f"{r['seed']:5d} {r['effect']:9} {r['sections']:2d} {r['points']:4d} {r['noise']:6.2%} "
                       f"{r['fmt']:3} | {','.join(r['truth']) or 'none'} {r['truth_drift'] or ''} | "

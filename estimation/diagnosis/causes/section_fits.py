@@ -176,11 +176,36 @@ def section_pairs(ctx: Context, results: dict[str, FitResult], baseline: FitResu
 SPLIT_STARTS = 8
 #: Seeds of each split (:meth:`.unmerge.Unmerged.seeds`, ranked by their cost) fitted through smoothed errors.
 SPLIT_SEEDS = 3
+#: Splits refitted from random starts (:func:`split_every_section`): the best of the seeded fits, ranked by their
+#: objective with the merged halves' penalty. The random starts move a seeded split by a share of its cost (the
+#: equal-halves saddle); they do not turn a split that fits no better than the rest into the best one.
+SPLIT_REFINED = 3
+
+
+def _split_seeded(args: tuple[Context, Any, Any, int, Sequence[Effect], np.ndarray]) -> tuple[Any, Any] | None:
+    """Section ``j`` of chain ``ch`` made two and fitted from its best seeds (:func:`split_every_section`):
+    ``(Unmerged, FitResult)``, None when the split cannot be built or fitted."""
+    ctx, circuit, ch, j, effects, tail = args
+    try:
+        um = Unmerged(circuit, ch, j)
+        pair = {um.first["L"].lower(), um.second["L"].lower()}
+        ks = [e.name for e in um.candidate.circuit.of_kind("K") if {n.lower() for n in e.nodes} & pair]
+        fit = ctx.fit(um.candidate.circuit, effects, couplings=ks)
+        rows = um.seeds(fit.free, tail)
+        r = fit.residuals_batch(rows)
+        order = np.argsort(np.sum(r * r, axis=1))[:SPLIT_SEEDS]
+        seeded = min((fit.fit_continued(rows[i], max_nfev=100) for i in order), key=lambda x: x.objective)
+    except CANDIDATE_FAILURES:
+        return None
+    seeded.unmerged = um
+    seeded.couplings_freed = ks
+    return um, seeded
 
 
 def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], from_design: bool = False
                         ) -> FitResult | None:
-    """Every section of the fitted model made two whole sections, each fitted from several starts; the best.
+    """Every section of the fitted model made two whole sections, each fitted from its seeds; the best from
+    several starts.
 
     With effects in ``base`` (a cause named or fitted alone) they stay in every fit, their parameters free. With
     ``from_design`` the sections of the design (the nominal circuit) are split instead of the fitted model's: a
@@ -189,11 +214,13 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     For each section ``j`` of each winding the split of :class:`.unmerge.Unmerged` (two sections in series, the
     inductance and the series capacitance shared between them, the new node with its own capacitance to ground)
     is built from the *fitted* model's values, with the couplings of the two new inductors free (the coupling
-    partition of the split). Its ``SPLIT_SEEDS`` best seeds (by cost) are fitted through smoothed errors, and from
-    the best of them the values are fitted again from ``SPLIT_STARTS`` random starts around it, as the baseline is
-    (:func:`.baseline.fit_multistart`): the equal halves of a split are a saddle of the split model, and the seeds'
-    partitions are a few points of a space the random starts sample more widely. Every section of every winding is
-    tried, so the search does not depend on where the misfit seemed to sit.
+    partition of the split). Its ``SPLIT_SEEDS`` best seeds (by cost) are fitted through smoothed errors (every
+    section's, shared with the helper process). The ``SPLIT_REFINED`` best splits, ranked by objective with their
+    halves merged back under the prior (:meth:`.context.Context.penalised`), are fitted again from
+    ``SPLIT_STARTS`` random starts around them, as the baseline is (:func:`.baseline.fit_multistart`): the equal
+    halves of a split are a saddle of the split model, and the seeds' partitions are a few points of a space the
+    random starts sample more widely. Every section of every winding is tried, so the search does not depend on
+    where the misfit seemed to sit.
     """
     from estimation.diagnosis.baseline import fit_multistart
     from estimation.diagnosis.causes.sections import find_chains
@@ -201,29 +228,26 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     circuit = ctx.nominal if from_design and ctx.nominal is not None else base.fitted_circuit()
     effects = list(base.effects)
     tail = base.x[current_nc(base):]
+    t = time.perf_counter()
+    items = [(ctx, circuit, ch, j, effects, tail) for ch in find_chains(circuit, ports) for j in range(len(ch.sections))]
+    seeded = [s for s in shared_map(_split_seeded, items) if s is not None]
+    seeded.sort(key=lambda s: ctx.penalised(s[1]))
+    log(f"  {len(seeded)} splits fitted from their seeds ({time.perf_counter() - t:.1f} s)"
+        + (f"; best {seeded[0][0].candidate.how}: cost {seeded[0][1].cost:.4g}" if seeded else ""), ctx.progress)
     best = None
-    for ch in find_chains(circuit, ports):
-        for j in range(len(ch.sections)):
-            t = time.perf_counter()
-            try:
-                um = Unmerged(circuit, ch, j)
-                pair = {um.first["L"].lower(), um.second["L"].lower()}
-                ks = [e.name for e in um.candidate.circuit.of_kind("K") if {n.lower() for n in e.nodes} & pair]
-                fit = ctx.fit(um.candidate.circuit, effects, couplings=ks)
-                rows = um.seeds(fit.free, tail)
-                r = fit.residuals_batch(rows)
-                order = np.argsort(np.sum(r * r, axis=1))[:SPLIT_SEEDS]
-                seeded = min((fit.fit_continued(rows[i], max_nfev=100) for i in order), key=lambda x: x.objective)
-                again = ctx.fit(seeded.fitted_circuit(), effects, couplings=ks)
-                res = fit_multistart(again, starts=SPLIT_STARTS, good_enough=NOISE_MARGIN * ctx.floor,
-                                     x0=np.concatenate([np.zeros(again.nc), seeded.x[again.nc:]]))
-            except CANDIDATE_FAILURES:
-                continue
-            res.structure = um.candidate.how + (" (from the design values)" if from_design else "")
-            res.unmerged = um
-            res.causes = [c for c in base.causes if c not in ("none", "missing-section")] + ["missing-section"]
-            res.cause = "+".join(res.causes)
-            log(f"  {um.candidate.how}: cost {res.cost:.4g} ({time.perf_counter() - t:.1f} s)", ctx.progress)
-            if best is None or ctx.penalised(res) < ctx.penalised(best):
-                best = res
+    for um, first in seeded[:SPLIT_REFINED]:
+        t = time.perf_counter()
+        try:
+            again = ctx.fit(first.fitted_circuit(), effects, couplings=first.couplings_freed)
+            res = fit_multistart(again, starts=SPLIT_STARTS, good_enough=NOISE_MARGIN * ctx.floor,
+                                 x0=np.concatenate([np.zeros(again.nc), first.x[again.nc:]]))
+        except CANDIDATE_FAILURES:
+            continue
+        res.structure = um.candidate.how + (" (from the design values)" if from_design else "")
+        res.unmerged = um
+        res.causes = [c for c in base.causes if c not in ("none", "missing-section")] + ["missing-section"]
+        res.cause = "+".join(res.causes)
+        log(f"  {um.candidate.how}: cost {res.cost:.4g} ({time.perf_counter() - t:.1f} s)", ctx.progress)
+        if best is None or ctx.penalised(res) < ctx.penalised(best):
+            best = res
     return best
