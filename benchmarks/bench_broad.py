@@ -36,21 +36,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from broad_cases import EFFECTS, draw, write  # noqa: E402
+from broad_cases import EFFECTS, draw, reported_drift, write  # noqa: E402
 
 from estimation.diagnosis import diagnose_frequency  # noqa: E402
 from pris_cosim.measured.formats import load_measured  # noqa: E402
 from pris_cosim.circuits.netlist import read_netlist  # noqa: E402
-
-
-def drift_names(drift: list[dict]) -> set[str]:
-    out = set()
-    for d in drift:
-        if d.get("members"):  # a group: its members, less a series capacitance in parallel with one of them
-            out.update(m for m in d["members"] if not (m in d.get("in_parallel", []) and not m.lower().startswith("cg")))
-        else:
-            out.add(d["name"])
-    return out
 
 
 def run(seed: int, effect: str | None, folder: Path) -> dict:
@@ -61,7 +51,7 @@ def run(seed: int, effect: str | None, folder: Path) -> dict:
     d = diagnose_frequency(m.frequency_hz, m.responses, circuit=read_netlist(str(net)), port=case.port,
                            progress=False, tolerance=0.2)
     wall = time.perf_counter() - t
-    said, drift = sorted(d.causes), drift_names(d.drift)
+    said, drift = sorted(d.causes), reported_drift(d.drift)
     ok = said == sorted(case.causes) and (case.drift is None or drift == set(case.drift))
     return {"seed": seed, "effect": case.effect, "sections": case.netlist.count("\nL"), "points": case.frequency_hz.size,
             "noise": case.noise, "fmt": case.fmt, "truth": case.causes, "truth_drift": case.drift, "said": d.cause,
@@ -78,7 +68,7 @@ def speed(folder: Path) -> float:
     d = diagnose_frequency(m.frequency_hz, m.responses, circuit=read_netlist(str(net)), port="n1", progress=False)
     wall = time.perf_counter() - t
     print(f"speed case (seed {seed}, {case.fmt}, nothing hidden): {d.cause}, drift "
-          f"{sorted(drift_names(d.drift)) or 'none'}")
+          f"{sorted(reported_drift(d.drift)) or 'none'}")
     return wall
 
 

@@ -215,6 +215,18 @@ def draw(seed: int, effect: str | None = None, points: int | None = None) -> Cas
                 None if effect in ("skin", "coreloss", "split") else drift, noise, fmt, extra)
 
 
+def reported_drift(drift: list[dict]) -> set[str]:
+    """The names a diagnosis reports beyond the tolerance, as the truth lists them: a group's drift by its members
+    (less a series capacitance reported with the ground capacitance it is in parallel with)."""
+    out: set[str] = set()
+    for d in drift:
+        if d.get("members"):
+            out.update(m for m in d["members"] if not (m in d.get("in_parallel", []) and not m.lower().startswith("cg")))
+        else:
+            out.add(d["name"])
+    return out
+
+
 def write(case: Case, directory: Path) -> tuple[Path, Path]:
     """The measured file (CSV ``frequency_hz,Zin_mag,Zin_phase_deg`` or a Touchstone ``.s1p`` in 50 Ohm RI) and
     the design netlist."""

@@ -27,7 +27,9 @@ Steps:
    that does best alone. A baseline that does not explain the data
    (:meth:`.context.Context.unfit`) is also tried against the drift of a
    whole group of values (:mod:`.group_drift`), the answer when its BIC is
-   below every single cause's.
+   below every single cause's; one that does not explain the data against
+   one value off the design (:func:`.drift.located_drift`), weighed the same
+   way (the freed value counted as one parameter).
 3. Forward selection: the cause with the lowest Bayesian information
    criterion ``BIC = N ln(RSS/N) + k ln N`` is named if it beats the
    baseline's BIC by ``min_delta_bic`` (10: "very strong" evidence on Kass and
@@ -297,6 +299,24 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         else:
             log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {rival.cause} has a BIC lower by {g_bic - rival.bic:.1f}:"
                 " not reported", progress)
+    # ---- one value of the design really off (a capacitance doubled): weighed as a group's drift is, by BIC against
+    # every single cause, the freed value one parameter; below them all it is the answer (drift, no cause), and no
+    # structure is sought for what it explains
+    if prior is not None and group_entry is None and passes and results and not ctx.explained(baseline):
+        one = located_drift(ctx, baseline, NOISE_MARGIN * floor["cost"], lambda m: log(m, progress))
+        if one is not None:
+            o_bic = one.bic + np.log(one.n_residuals)
+            rival = min(results.values(), key=lambda r: r.bic)
+            if o_bic < rival.bic:
+                log(f"{one.freed} off the design: BIC below every single cause's ({rival.cause}: "
+                    f"{rival.bic - o_bic:.1f} higher): the value's drift explains the data, no cause", progress)
+                baseline = one
+                failed += [{"cause": c, "cost": r.cost, "reason": "the drift of one value explains the data with a "
+                            "lower BIC"} for c, r in results.items()]
+                results, passes = {}, 0
+            else:
+                log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.bic:.1f}: "
+                    "not reported", progress)
     # ---- one-port data that no single cause explains, above the noise or fitted only by distorted values: every
     # section split, from the fitted values and (distorted values) from the design's
     if (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes
@@ -369,7 +389,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                      "section stays", progress)
     extended = current if chosen else None
     # ---- a value of the design really off: one value freed may explain what the prior's spread-out fit leaves
-    if prior is not None and not ctx.explained(extended or baseline):
+    if prior is not None and not ctx.explained(extended or baseline) and not hasattr(extended or baseline, "freed"):
         located = located_drift(ctx, extended or baseline, NOISE_MARGIN * floor["cost"], lambda m: log(m, progress))
         if located is not None:
             located.structure = (extended or baseline).structure

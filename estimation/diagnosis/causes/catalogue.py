@@ -53,6 +53,11 @@ measured short-circuit impedance it displaced the skin effect).
     thesis's and the one-pole forms only (the distributed form is a core's:
     at the port of a short-circuit measurement it took the winding's skin
     effect).
+    A winding on a laminated core without a core loop (a ladder's sections
+    only) also has the lamination form: the classical eddy-current law on
+    every winding inductance and its mutuals,
+    ``L [1 - d + d tanh(q)/q]``, ``q = (1 + j) sqrt(f/f_c)/2``, ``d`` the
+    share of the flux in the core (:class:`LaminationLoss`).
 ``magnetising-inductance``
     thesis (2.5): ``L(f) = a f^(-b) L_linear`` (``a = k f_ref^b``, so
     ``L(f_ref) = k L_linear``; ``k = 1`` unless the level is free); causal:
@@ -457,6 +462,63 @@ class CoreLoss(Effect):
         return replace_with_ladder(_numeric(circuit, name), name, lad), note
 
 
+@dataclass
+class LaminationLoss(Effect):
+    """Eddy-current loss of a laminated core in the winding inductances it carries (no core loop in the circuit).
+
+    The flux in a lamination of thickness ``t`` diffuses into the sheet: its
+    permeability is ``mu tanh(q)/q``, ``q = (1 + j) t / (2 delta)``, with the
+    skin depth ``delta = t`` at the corner ``f_c`` (``t/delta = sqrt(f/f_c)``;
+    the classical eddy-current law of a lamination, e.g. Bertotti, *Hysteresis
+    in Magnetism*, 1998, ch. 12). A share ``d`` of each inductance's flux is in
+    the core, the rest in air: ``L(f) = L [1 - d + d tanh(q)/q]``, on every
+    winding inductance and their mutuals. A loss, not a change of the
+    magnetising level: ``L(f) = L`` far below ``f_c`` and the core's loss
+    angle reaches 45 deg above it.
+    """
+
+    def __post_init__(self) -> None:
+        self.cause = "core-loss"
+        self.form = "lamination"
+        lo, hi = _corner_range(self)
+        self.parameters = [
+            ExtraParameter("d", 1e-3, 1.0, (0.5, 0.95), log=False, description="share of the flux in the core"),
+            ExtraParameter("fc", lo, hi, _corner_starts(self), description="corner (skin depth = lamination), Hz"),
+        ]
+
+    def applies(self, circuit, groups):
+        return groups.core_resistor is None and bool(groups.inductors.get(self.group))
+
+    def branches(self, circuit, groups):
+        return MagnetisingInductance.branches(self, circuit, groups)
+
+    def scale(self, f: np.ndarray, p: Mapping[str, np.ndarray]) -> np.ndarray:
+        """``L(f) / L`` (P, F)."""
+        q = (1 + 1j) * 0.5 * np.sqrt(f[None, :] / _p(p, "fc"))
+        e = np.exp(-2 * q)
+        d = _p(p, "d")
+        return 1 - d + d * (1 - e) / ((1 + e) * q)  # tanh(q) without overflow (Re q > 0)
+
+    def branch_changes(self, circuit, groups, values, f, p):
+        return MagnetisingInductance.branch_changes(self, circuit, groups, values, f, p)
+
+    def formula(self, p):
+        return (f"L(f) = L [1 - d + d tanh(q)/q], q = (1 + j) sqrt(f/f_c)/2 (lamination), d = {p['d']:.4g}, "
+                f"f_c = {p['fc']:.4g} Hz")
+
+    def realise(self, circuit, groups, p, fmin, fmax):
+        values = circuit.resolve(check=False)
+        out = circuit
+        pp = {k: np.array([v]) for k, v in p.items()}
+        for name in groups.inductors.get(self.group, ()):
+            lv = float(values[name.lower()])
+            lad = fit_impedance(lambda x, lv=lv: 2j * np.pi * x * lv * self.scale(np.atleast_1d(x), pp)[0],
+                                fmin, fmax, 10)
+            out = replace_with_ladder(_numeric(out, name), name, lad)
+        return out, ("winding inductances as R-L ladders following the lamination's eddy-current law; coupled "
+                     "inductors keep their couplings on the ladder's series inductance")
+
+
 # ---------------------------------------------------------------------------------------------- magnetising
 @dataclass
 class MagnetisingInductance(Effect):
@@ -672,6 +734,9 @@ def effect_variants(cause: str, groups: Groups, circuit: Circuit, f_ref: float, 
         # without one is a shunt loss, in the thesis's form and with one relaxation time only
         elif cause == "core-loss" and (form != "relaxation" or groups.core_resistor is not None):
             out.append(CoreLoss(form=form, group="all", f_ref=f_ref, f_max=f_max))
+    # a winding on a laminated core without a core loop: the core's loss is in the winding inductances themselves
+    if cause == "core-loss" and groups.core_resistor is None:
+        out.append(LaminationLoss(group="all", f_ref=f_ref, f_max=f_max))
     if one_port and cause == "stray-capacitance":
         w = 2 * np.pi * f_max
         out.append(StrayCapacitance(form="causal", group="port", f_ref=f_max, c_scale=1 / (w * scale)))
