@@ -201,3 +201,19 @@ def test_magnetising_causal_form_with_a_level_is_realised_by_a_passive_ladder():
     err = np.log(z / want)
     assert np.max(np.abs(err.real)) * 20 / np.log(10) < 0.1 and np.degrees(np.max(np.abs(err.imag))) < 1.0
     assert "k = 1.4" in eff.formula(p)
+
+
+def test_lamination_core_loss_is_realised_by_a_passive_ladder_even_with_all_the_flux_in_the_core():
+    """A ladder's winding inductance on a laminated core: ``j w L [1 - d + d tanh(q)/q]``, ``q = (1 + j) sqrt(f/f_c)/2``
+    written out here (scipy's tanh); with ``d = 1`` nothing stays in series, and the realised ladder still has a
+    positive series inductance and follows the law."""
+    from estimation.diagnosis.causes.catalogue import LaminationLoss
+
+    f = np.logspace(3, 7, 60)
+    for d in (0.6, 1.0):
+        eff = LaminationLoss(f_ref=1e3, f_max=1e7)
+        assert eff.cause == "core-loss" and eff.label == "core-loss (lamination) [all]"
+        p = {"d": d, "fc": 3e4}
+        _, note, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n", p, 1e3, 1e7, f)
+        q = (1 + 1j) * np.sqrt(f / p["fc"]) / 2
+        _assert_within(z, 2.0 + 2j * np.pi * f * 10e-3 * (1 - d + d * np.tanh(q) / q))

@@ -513,10 +513,17 @@ class LaminationLoss(Effect):
         for name in groups.inductors.get(self.group, ()):
             lv = float(values[name.lower()])
             lad = fit_impedance(lambda x, lv=lv: 2j * np.pi * x * lv * self.scale(np.atleast_1d(x), pp)[0],
-                                fmin, fmax, 10)
+                                fmin, fmax, 14)
+            # all the flux in the core (d = 1): no inductance is left in series, but a coupled inductor keeps its
+            # couplings on it; a ten-thousandth of it changes the ladder by 1e-4 of j w L over the band
+            lad = replace(lad, l0=max(lad.l0, LAMINATION_SERIES_FLOOR * lv))
             out = replace_with_ladder(_numeric(out, name), name, lad)
         return out, ("winding inductances as R-L ladders following the lamination's eddy-current law; coupled "
                      "inductors keep their couplings on the ladder's series inductance")
+
+
+#: Least series inductance of a lamination's realised ladder, relative to the inductance it replaces.
+LAMINATION_SERIES_FLOOR = 1e-4
 
 
 # ---------------------------------------------------------------------------------------------- magnetising
