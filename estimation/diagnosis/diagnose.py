@@ -302,8 +302,10 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # ---- one value of the design really off (a capacitance doubled): weighed as a group's drift is, by BIC against
     # every single cause, the freed value one parameter; below them all it is the answer (drift, no cause), and no
     # structure is sought for what it explains
+    located_on = None  # the model the search for one value off the design was run on (not run again on it)
     if prior is not None and group_entry is None and passes and results and not ctx.explained(baseline):
         one = located_drift(ctx, baseline, NOISE_MARGIN * floor["cost"], lambda m: log(m, progress))
+        located_on = baseline
         if one is not None:
             o_bic = one.bic + np.log(one.n_residuals)
             rival = min(results.values(), key=lambda r: r.bic)
@@ -389,7 +391,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                      "section stays", progress)
     extended = current if chosen else None
     # ---- a value of the design really off: one value freed may explain what the prior's spread-out fit leaves
-    if prior is not None and not ctx.explained(extended or baseline) and not hasattr(extended or baseline, "freed"):
+    if (prior is not None and not ctx.explained(extended or baseline) and not hasattr(extended or baseline, "freed")
+            and (extended or baseline) is not located_on):
         located = located_drift(ctx, extended or baseline, NOISE_MARGIN * floor["cost"], lambda m: log(m, progress))
         if located is not None:
             located.structure = (extended or baseline).structure
