@@ -109,6 +109,14 @@ def main() -> None:
             print(f"right {sum(r['ok'] for r in rows)}/{len(rows)}; false alarms {alarms} "
                   f"(of {sum(not r['truth'] for r in rows)} draws without a cause); clean draws with drift "
                   f"{sum(bool(r['drift']) for r in clean)}/{len(clean)}")
+            print("right by effect: " + ", ".join(
+                f"{e} {sum(r['ok'] for r in rows if r['effect'] == e)}/{sum(r['effect'] == e for r in rows)}"
+                for e in EFFECTS if any(r["effect"] == e for r in rows)))
+            walls = np.array([r["wall"] for r in rows])
+            eight = np.array([r["wall"] for r in rows if r["sections"] == 8])
+            print(f"wall per draw: median {np.median(walls):.0f} s, 90th percentile {np.percentile(walls, 90):.0f} s"
+                  + (f"; 8-section draws ({eight.size}): median {np.median(eight):.0f} s, longest {eight.max():.0f} s"
+                     if eight.size else ""))
         print(f"speed: 8-section one-port netlist, 500 points: {speed(folder):.1f} s")
 
 
