@@ -51,7 +51,7 @@ def run(seed: int, effect: str | None, folder: Path) -> dict:
     d = diagnose_frequency(m.frequency_hz, m.responses, circuit=read_netlist(str(net)), port=case.port,
                            progress=False, tolerance=0.2)
     wall = time.perf_counter() - t
-    said, drift = sorted(d.causes), reported_drift(d.drift)
+    said, drift = sorted(d.causes), reported_drift(d.drift, case.drift)
     ok = said == sorted(case.causes) and (case.drift is None or drift == set(case.drift))
     return {"seed": seed, "effect": case.effect, "sections": case.netlist.count("\nL"), "points": case.frequency_hz.size,
             "noise": case.noise, "fmt": case.fmt, "truth": case.causes, "truth_drift": case.drift, "said": d.cause,

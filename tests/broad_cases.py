@@ -215,15 +215,18 @@ def draw(seed: int, effect: str | None = None, points: int | None = None) -> Cas
                 None if effect in ("skin", "coreloss", "split") else drift, noise, fmt, extra)
 
 
-def reported_drift(drift: list[dict]) -> set[str]:
+def reported_drift(drift: list[dict], truth: list[str] | None = None) -> set[str]:
     """The names a diagnosis reports beyond the tolerance, as the truth lists them: a group's drift by its members
-    (less a series capacitance reported with the ground capacitance it is in parallel with)."""
+    (less a series capacitance reported with the ground capacitance it is in parallel with). A value reported with
+    others of its kind across the same two nodes (``parallel``: the last section's series capacitance and its
+    node's capacitance to ground) is one capacitance to the terminals: it stands for the one ``truth`` names."""
     out: set[str] = set()
     for d in drift:
         if d.get("members"):
             out.update(m for m in d["members"] if not (m in d.get("in_parallel", []) and not m.lower().startswith("cg")))
         else:
-            out.add(d["name"])
+            alias = [p for p in d.get("parallel", []) if truth and p in truth and d["name"] not in truth]
+            out.add(alias[0] if alias else d["name"])
     return out
 
 

