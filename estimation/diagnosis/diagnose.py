@@ -258,8 +258,10 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # ---- a whole group of values off the design by one factor (all capacitances to ground x1.5): drift of the group
     # (:mod:`.group_drift`), sought from the baseline; it is the answer when its BIC (the factor one parameter) is
     # below every single cause's, measured after them
+    # (also for a baseline at the noise with values beyond the tolerance: their drift, value by value, is what the
+    # group's one factor is weighed against)
     group = None
-    if prior is not None and not ctx.explained(baseline):
+    if prior is not None and (not ctx.explained(baseline) or ctx.drift(baseline)):
         group = group_drift(ctx, baseline, lambda m: log(m, progress))
     group_entry = None
 
