@@ -87,7 +87,7 @@ measured short-circuit impedance it displaced the skin effect).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -507,17 +507,15 @@ class LaminationLoss(Effect):
                 f"f_c = {p['fc']:.4g} Hz")
 
     def realise(self, circuit, groups, p, fmin, fmax):
-        values = circuit.resolve(check=False)
-        out = circuit
         pp = {k: np.array([v]) for k, v in p.items()}
-        for name in groups.inductors.get(self.group, ()):
-            lv = float(values[name.lower()])
-            lad = fit_impedance(lambda x, lv=lv: 2j * np.pi * x * lv * self.scale(np.atleast_1d(x), pp)[0],
-                                fmin, fmax, 14)
+
+        def ladder(lv: float) -> FosterRL:
+            lad = fit_impedance(lambda x: 2j * np.pi * x * lv * self.scale(np.atleast_1d(x), pp)[0], fmin, fmax, 14)
             # all the flux in the core (d = 1): no inductance is left in series, but a coupled inductor keeps its
             # couplings on it; a ten-thousandth of it changes the ladder by 1e-4 of j w L over the band
-            lad = replace(lad, l0=max(lad.l0, LAMINATION_SERIES_FLOOR * lv))
-            out = replace_with_ladder(_numeric(out, name), name, lad)
+            return replace(lad, l0=max(lad.l0, LAMINATION_SERIES_FLOOR * lv))
+
+        out = _inductances_as_ladders(circuit, groups.inductors.get(self.group, ()), ladder)
         return out, ("winding inductances as R-L ladders following the lamination's eddy-current law; coupled "
                      "inductors keep their couplings on the ladder's series inductance")
 
@@ -608,17 +606,14 @@ class MagnetisingInductance(Effect):
         return f"Z_L(f) = j w L (j f/{self.f_ref:.4g} Hz)^(-b), b = {p['b']:.4g}"
 
     def realise(self, circuit, groups, p, fmin, fmax):
-        values = circuit.resolve(check=False)
-        out = circuit
         pp = {k: np.array([v]) for k, v in p.items()}
-        for name in groups.inductors.get(self.group, ()):
-            lv = float(values[name.lower()])
+
+        def ladder(lv: float) -> FosterRL:
             if self.form == "thesis":
-                lad = fit_inductance(lambda x, lv=lv: lv * self.scale(np.atleast_1d(x), pp)[0].real, fmin, fmax, 8)
-            else:
-                lad = fit_impedance(lambda x, lv=lv: 2j * np.pi * x * lv * self.scale(np.atleast_1d(x), pp)[0],
-                                    fmin, fmax, 10)
-            out = replace_with_ladder(_numeric(out, name), name, lad)
+                return fit_inductance(lambda x: lv * self.scale(np.atleast_1d(x), pp)[0].real, fmin, fmax, 8)
+            return fit_impedance(lambda x: 2j * np.pi * x * lv * self.scale(np.atleast_1d(x), pp)[0], fmin, fmax, 10)
+
+        out = _inductances_as_ladders(circuit, groups.inductors.get(self.group, ()), ladder)
         note = ("winding inductances as R-L ladders; coupled inductors keep their couplings on the ladder's series "
                 "inductance, the sections are uncoupled")
         if self.form == "thesis":
@@ -713,6 +708,15 @@ class LeadInductance(Effect):
         c.add("Rlead", port, "lead_mid", p["r"])
         c.add("Llead", "lead_mid", inner, p["l"])
         return c, "series lead R-L between the terminal and the winding"
+
+
+def _inductances_as_ladders(circuit: Circuit, names: Sequence[str], ladder: Callable[[float], FosterRL]) -> Circuit:
+    """``circuit`` with each inductor of ``names`` replaced by ``ladder(L)`` (its resolved inductance ``L``, H)."""
+    values = circuit.resolve(check=False)
+    out = circuit
+    for name in names:
+        out = replace_with_ladder(_numeric(out, name), name, ladder(float(values[name.lower()])))
+    return out
 
 
 def _numeric(circuit: Circuit, name: str) -> Circuit:
