@@ -260,9 +260,16 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # below every single cause's, measured after them
     # (also for a baseline at the noise with values beyond the tolerance: their drift, value by value, is what the
     # group's one factor is weighed against)
-    group = None
+    group, group_on = None, baseline
     if prior is not None and (not ctx.explained(baseline) or ctx.drift(baseline)):
-        group = group_drift(ctx, baseline, lambda m: log(m, progress))
+        group_fits: list[FitResult] = []
+        group = group_drift(ctx, baseline, lambda m: log(m, progress), group_fits)
+        # a group's fit, started from the design values scaled, that fits far better than the baseline found the
+        # baseline's own model a better optimum: the baseline refitted from its values, and the groups sought again
+        better = [g for g in group_fits if g.objective < 0.5 * baseline.objective]
+        if better:
+            baseline = _polish_baseline(ctx, baseline, better, progress)
+            group, group_on = group_drift(ctx, baseline, lambda m: log(m, progress)), baseline
     group_entry = None
 
     # ---- single causes; a candidate's circuit values may fit better than the baseline's own optimum: then the
@@ -286,41 +293,15 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         if not moved or explained or attempt == 2:
             break
         log("causes fitted again from the refitted baseline", progress)
-    if group is not None:
-        g_bic = group[0].bic + np.log(group[0].n_residuals)
-        rival = min(results.values(), key=lambda r: r.bic) if results else None
-        if rival is None or g_bic < rival.bic:
-            log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: BIC below every single cause's"
-                + (f" ({rival.cause}: {rival.bic - g_bic:.1f} higher)" if rival else "") + ": the group's drift "
-                "explains the data, no cause", progress)
-            baseline, prior, group_entry = group
-            ctx.prior = prior
-            failed += [{"cause": c, "cost": r.cost, "reason": "the drift of a group explains the data with a lower BIC"}
-                       for c, r in results.items()]
-            results, passes = {}, 0
-        else:
-            log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {rival.cause} has a BIC lower by {g_bic - rival.bic:.1f}:"
-                " not reported", progress)
-    # ---- one value of the design really off (a capacitance doubled): weighed as a group's drift is, by BIC against
-    # every single cause, the freed value one parameter; below them all it is the answer (drift, no cause), and no
-    # structure is sought for what it explains
-    located_on = None  # the model the search for one value off the design was run on (not run again on it)
-    if prior is not None and group_entry is None and passes and results and not ctx.explained(baseline):
-        one = located_drift(ctx, baseline, NOISE_MARGIN * floor["cost"], lambda m: log(m, progress))
-        located_on = baseline
-        if one is not None:
-            o_bic = one.bic + np.log(one.n_residuals)
-            rival = min(results.values(), key=lambda r: r.bic)
-            if o_bic < rival.bic:
-                log(f"{one.freed} off the design: BIC below every single cause's ({rival.cause}: "
-                    f"{rival.bic - o_bic:.1f} higher): the value's drift explains the data, no cause", progress)
-                baseline = one
-                failed += [{"cause": c, "cost": r.cost, "reason": "the drift of one value explains the data with a "
-                            "lower BIC"} for c, r in results.items()]
-                results, passes = {}, 0
-            else:
-                log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.bic:.1f}: "
-                    "not reported", progress)
+    if (prior is not None and baseline.objective < 0.5 * group_on.objective
+            and (not ctx.explained(baseline) or ctx.drift(baseline))):
+        group = group_drift(ctx, baseline, lambda m: log(m, progress))  # sought again on the baseline refitted
+    # ---- the group's drift, then one value off the design, weighed against every single cause
+    baseline, group_entry, answered, located_on = _drift_answer(ctx, baseline, group, results, failed, None,
+                                                                 bool(passes))
+    prior = ctx.prior
+    if answered:
+        results, passes = {}, 0
     # ---- one-port data that no single cause explains, above the noise or fitted only by distorted values: every
     # section split, from the fitted values and (distorted values) from the design's
     if (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes
@@ -342,6 +323,18 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             log(f"missing-section (every split): {wide.structure}: cost {wide.cost:.4g}, gain "
                  f"{1 - wide.cost / baseline.cost:.3f}, dBIC {baseline.bic - wide.bic:.1f} "
                  f"({time.perf_counter() - t:.1f} s)", progress)
+        # a split whose halves merged back fit far better than the baseline found a basin the baseline's own fit
+        # missed: the baseline refitted from them, and the drift of a group or of one value weighed again on it
+        again = _merged_baseline(ctx, baseline, wide) if wide is not None and prior is not None else None
+        if again is not None and group_entry is None:
+            baseline = again
+            group = group_drift(ctx, baseline, lambda m: log(m, progress)) \
+                if not ctx.explained(baseline) or ctx.drift(baseline) else None
+            baseline, group_entry, answered, located_on = _drift_answer(ctx, baseline, group, results, failed,
+                                                                        located_on, True)
+            prior = ctx.prior
+            if answered:
+                results, passes = {}, 0
     for cause in list(results):
         if results[cause].objective >= baseline.objective:
             failed.append({"cause": cause, "cost": results.pop(cause).cost,
@@ -637,6 +630,76 @@ def _polish_baseline(ctx: Context, baseline: FitResult, fits, progress: bool) ->
         best.wall_s += baseline.wall_s
         log(f"baseline refitted from a candidate's values: cost {baseline.cost:.4g} -> {best.cost:.4g}", progress)
     return best
+
+
+def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, results: dict[str, FitResult],
+                  failed: list[dict[str, Any]], located_on: FitResult | None, search: bool
+                  ) -> tuple[FitResult, dict[str, Any] | None, bool, FitResult | None]:
+    """A group's drift, then one value off the design, weighed against every cause in ``results`` by BIC.
+
+    A whole group of values off the design by one factor (:mod:`.group_drift`) is the answer when its BIC (the
+    factor one parameter) is below every cause's. Else, with causes fitted (``search``) and the baseline not
+    explaining the data, one value of the design really off (a capacitance doubled, :func:`.drift.located_drift`)
+    is weighed the same way, the freed value one parameter; below them all it is the answer (drift, no cause), and
+    no structure is sought for what it explains. ``failed`` gets the causes so set aside.
+
+    Returns
+    -------
+    tuple
+        The baseline (the group's or the value's fit when one is the answer), the group's drift entry (or None),
+        whether a drift is the answer, and the model the one-value search ran on (not run again on it).
+    """
+    progress = ctx.progress
+    if group is not None:
+        g_bic = group[0].bic + np.log(group[0].n_residuals)
+        rival = min(results.values(), key=lambda r: r.bic) if results else None
+        if rival is None or g_bic < rival.bic:
+            log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: BIC below every single cause's"
+                + (f" ({rival.cause}: {rival.bic - g_bic:.1f} higher)" if rival else "") + ": the group's drift "
+                "explains the data, no cause", progress)
+            ctx.prior = group[1]
+            failed += [{"cause": c, "cost": r.cost, "reason": "the drift of a group explains the data with a lower BIC"}
+                       for c, r in results.items()]
+            return group[0], group[2], True, located_on
+        log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {rival.cause} has a BIC lower by {g_bic - rival.bic:.1f}:"
+            " not reported", progress)
+    if ctx.prior is None or not search or not results or ctx.explained(baseline) or baseline is located_on:
+        return baseline, None, False, located_on
+    one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress))
+    if one is None:
+        return baseline, None, False, baseline
+    o_bic = one.bic + np.log(one.n_residuals)
+    rival = min(results.values(), key=lambda r: r.bic)
+    if o_bic < rival.bic:
+        log(f"{one.freed} off the design: BIC below every single cause's ({rival.cause}: "
+            f"{rival.bic - o_bic:.1f} higher): the value's drift explains the data, no cause", progress)
+        failed += [{"cause": c, "cost": r.cost, "reason": "the drift of one value explains the data with a lower BIC"}
+                   for c, r in results.items()]
+        return one, None, True, baseline
+    log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.bic:.1f}: not reported",
+        progress)
+    return baseline, None, False, baseline
+
+
+def _merged_baseline(ctx: Context, baseline: FitResult, split: FitResult) -> FitResult | None:
+    """The baseline refitted from a split's values with its two halves merged back (:meth:`.Context.merged`), if
+    that fits at least twice as well as ``baseline`` (else None)."""
+    merged = ctx.merged(split)
+    if not merged:
+        log("the split's values merged back: none to merge", ctx.progress)
+        return None
+    free = {n.lower() for n in baseline.values}
+    start = {n: v for n, v in split.values.items() if n.lower() in free}
+    start.update(merged)
+    trial = _baseline_refitted((ctx, baseline.circuit.with_values(start), 200))
+    if trial is None or trial.objective >= 0.5 * baseline.objective:
+        log(f"the baseline refitted from the split's values merged back: cost {baseline.cost:.4g} -> "
+            f"{trial.cost if trial is not None else float('nan'):.4g}, kept as it was", ctx.progress)
+        return None
+    trial.wall_s += baseline.wall_s
+    log(f"baseline refitted from the split's values merged back: cost {baseline.cost:.4g} -> {trial.cost:.4g}",
+        ctx.progress)
+    return trial
 
 
 def _baseline_refitted(args: tuple[Context, Circuit, int]) -> FitResult | None:
