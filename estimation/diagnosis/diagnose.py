@@ -638,7 +638,9 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     """A group's drift, then one value off the design, weighed against every cause in ``results`` by BIC.
 
     A whole group of values off the design by one factor (:mod:`.group_drift`) is the answer when its BIC (the
-    factor one parameter) is below every cause's. Else, with causes fitted (``search``) and the baseline not
+    factor one parameter) is below every cause's and below that of one value off the design alone (the other
+    description of a drift with one parameter: one resistance at 3x moves its group's mean beyond the tolerance
+    too). Else, with causes fitted (``search``) and the baseline not
     explaining the data, one value of the design really off (a capacitance doubled, :func:`.drift.located_drift`)
     is weighed the same way, the freed value one parameter; below them all it is the answer (drift, no cause), and
     no structure is sought for what it explains. ``failed`` gets the causes so set aside.
@@ -650,6 +652,16 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
         whether a drift is the answer, and the model the one-value search ran on (not run again on it).
     """
     progress = ctx.progress
+    one = None
+    if group is not None and baseline is not located_on:
+        # one value off the design is the other description of a drift with one parameter: a value 3x its design
+        # moves its group's mean beyond the tolerance too, and the lower BIC of the two tells which it is
+        one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress))
+        located_on = baseline
+        if one is not None and one.bic < group[0].bic:
+            log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {one.freed} alone off the design has a BIC lower by "
+                f"{group[0].bic - one.bic:.1f}: not the group", progress)
+            group = None
     if group is not None:
         g_bic = group[0].bic + np.log(group[0].n_residuals)
         rival = min(results.values(), key=lambda r: r.bic) if results else None
@@ -663,9 +675,10 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
             return group[0], group[2], True, located_on
         log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {rival.cause} has a BIC lower by {g_bic - rival.bic:.1f}:"
             " not reported", progress)
-    if ctx.prior is None or not search or not results or ctx.explained(baseline) or baseline is located_on:
+    if ctx.prior is None or not search or not results or ctx.explained(baseline):
         return baseline, None, False, located_on
-    one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress))
+    if baseline is not located_on:
+        one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress))
     if one is None:
         return baseline, None, False, baseline
     o_bic = one.bic + np.log(one.n_residuals)

@@ -156,6 +156,20 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple
                   f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
 
 
+def _freed_fit(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
+    """``(ctx, model, name, start)`` to the model fitted from ``start`` with the value ``name`` freed from its prior
+    (``freed`` set to it), or None when the fit fails (:func:`located_drift`)."""
+    ctx, final, name, x0 = args
+    loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
+    try:
+        one = ctx.fit(final.fitted_circuit(), final.effects, prior=loose, couplings=final.couplings)
+        trial = one.fit_continued(x0, max_nfev=100, tol=1e-7)
+    except CANDIDATE_FAILURES:
+        return None
+    trial.freed = name
+    return trial
+
+
 #: Range (ratios to the design) and points of the scan of each value tried as the one off the design
 #: (:func:`located_drift`).
 LOCATE_RANGE = (0.25, 4.0)
@@ -174,12 +188,15 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     not see the other basin (freeing one value's prior there changes
     nothing to first order), but the resonances do. Each value the prior
     holds is scanned alone over ``LOCATE_RANGE`` times its design value
-    (``LOCATE_SCAN`` points, the other values at theirs) for how close it
+    (``LOCATE_SCAN`` points, the other values at their design values, and
+    again at the final model's) for how close it
     brings the model's resonances to the measured ones
     (:func:`.align.resonance_mismatch`). The ``LOCATE_FITS`` values that
-    align best are each aligned from their best ratio with the others
-    pulled towards the design (:func:`.align.aligned_start`) and fitted
-    locally, that value freed from its prior. The best is kept if it
+    align best from each origin are each aligned from their best ratio with the others
+    pulled towards their origin (:func:`.align.aligned_start`) and fitted
+    locally, that value freed from its prior; so are the values the final
+    model moved beyond the tolerance (a resistance moves no resonance),
+    from where they are. The best is kept if it
     reaches ``target`` (the noise margin) without gross drift of the values
     still held, and beats the final model's BIC by ``DRIFT_MIN_DBIC``. The
     other values fitted that reach ``target`` too, with a BIC within
@@ -202,32 +219,38 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     cols = fit.anchored_columns
     if not cols.size:
         return None
-    x_design = fit.design_vector(np.concatenate([np.zeros(fit.nc), final.x[current_nc(final):]]))
-    # each value scanned alone (the others at their design values) for the resonances it alone can align
+    x_fitted = np.concatenate([np.zeros(fit.nc), final.x[current_nc(final):]])
+    x_design = fit.design_vector(x_fitted)
+    # each value scanned alone (the others at their design values, and at the final model's: a model far above the
+    # noise may still hold every other value near its truth) for the resonances it alone can align
     ratios = np.exp(np.linspace(np.log(LOCATE_RANGE[0]), np.log(LOCATE_RANGE[1]), LOCATE_SCAN))
-    X = np.repeat(x_design[None], cols.size * ratios.size, axis=0)
-    X[np.arange(X.shape[0]), np.repeat(cols, ratios.size)] += np.tile(np.log(ratios), cols.size)
-    mismatch = resonance_mismatch(fit, X).reshape(cols.size, ratios.size)
     starts = []
-    for p in np.argsort(mismatch.min(axis=1))[:LOCATE_FITS]:
-        x0 = X[p * ratios.size + int(np.argmin(mismatch[p]))]
-        aligned = aligned_start(fit, x0, free=[cols[p]])
-        starts.append((p, x0 if aligned is None else aligned))
+    for origin in (x_design, x_fitted):
+        X = np.repeat(origin[None], cols.size * ratios.size, axis=0)
+        # the scanned value's ratio to its design value, whatever the origin
+        X[np.arange(X.shape[0]), np.repeat(cols, ratios.size)] = np.tile(np.log(ratios), cols.size) + np.repeat(
+            x_design[cols], ratios.size)
+        mismatch = resonance_mismatch(fit, X).reshape(cols.size, ratios.size)
+        for p in np.argsort(mismatch.min(axis=1))[:LOCATE_FITS]:
+            x0 = X[p * ratios.size + int(np.argmin(mismatch[p]))]
+            aligned = aligned_start(fit, x0, free=[cols[p]])
+            starts.append((p, x0 if aligned is None else aligned))
+    # and the values the final model already moved beyond the tolerance, each freed where it is (a resistance moves
+    # no resonance, and the scan does not rank it)
+    beyond = [d["name"].lower() for d in ctx.drift(final)]
+    for name in beyond[:LOCATE_FITS]:
+        p = next((k for k, c in enumerate(cols) if fit.free[c].lower() == name), None)
+        if p is not None:
+            starts.append((p, x_fitted))
     t_align = time.perf_counter() - t0
 
     def others_gross(t: FitResult) -> bool:  # a value besides the freed one more than GROSS_DRIFT tolerances off
         return any(d["name"].lower() != t.freed.lower() for d in ctx.gross(t))
 
     best, trials = None, []
-    for p, x0 in starts:
-        name = fit.free[cols[p]]
-        loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
-        try:
-            one = ctx.fit(final.fitted_circuit(), final.effects, prior=loose, couplings=final.couplings)
-            trial = one.fit_continued(x0, max_nfev=100, tol=1e-7)
-        except CANDIDATE_FAILURES:
+    for trial in shared_map(_freed_fit, [(ctx, final, fit.free[cols[p]], x0) for p, x0 in starts]):
+        if trial is None:
             continue
-        trial.freed = name
         trials.append(trial)
         if best is None or trial.bic < best.bic:
             best = trial
