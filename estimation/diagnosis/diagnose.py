@@ -323,18 +323,6 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             log(f"missing-section (every split): {wide.structure}: cost {wide.cost:.4g}, gain "
                  f"{1 - wide.cost / baseline.cost:.3f}, dBIC {baseline.bic - wide.bic:.1f} "
                  f"({time.perf_counter() - t:.1f} s)", progress)
-        # a split whose halves merged back fit far better than the baseline found a basin the baseline's own fit
-        # missed: the baseline refitted from them, and the drift of a group or of one value weighed again on it
-        again = _merged_baseline(ctx, baseline, wide) if wide is not None and prior is not None else None
-        if again is not None and group_entry is None:
-            baseline = again
-            group = group_drift(ctx, baseline, lambda m: log(m, progress)) \
-                if not ctx.explained(baseline) or ctx.drift(baseline) else None
-            baseline, group_entry, answered, located_on = _drift_answer(ctx, baseline, group, results, failed,
-                                                                        located_on, True)
-            prior = ctx.prior
-            if answered:
-                results, passes = {}, 0
     for cause in list(results):
         if results[cause].objective >= baseline.objective:
             failed.append({"cause": cause, "cost": results.pop(cause).cost,
@@ -692,27 +680,6 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.bic:.1f}: not reported",
         progress)
     return baseline, None, False, baseline
-
-
-def _merged_baseline(ctx: Context, baseline: FitResult, split: FitResult) -> FitResult | None:
-    """The baseline refitted from a split's values with its two halves merged back (:meth:`.Context.merged`), if
-    that fits at least twice as well as ``baseline`` (else None)."""
-    merged = ctx.merged(split)
-    if not merged:
-        log("the split's values merged back: none to merge", ctx.progress)
-        return None
-    free = {n.lower() for n in baseline.values}
-    start = {n: v for n, v in split.values.items() if n.lower() in free}
-    start.update(merged)
-    trial = _baseline_refitted((ctx, baseline.circuit.with_values(start), 200))
-    if trial is None or trial.objective >= 0.5 * baseline.objective:
-        log(f"the baseline refitted from the split's values merged back: cost {baseline.cost:.4g} -> "
-            f"{trial.cost if trial is not None else float('nan'):.4g}, kept as it was", ctx.progress)
-        return None
-    trial.wall_s += baseline.wall_s
-    log(f"baseline refitted from the split's values merged back: cost {baseline.cost:.4g} -> {trial.cost:.4g}",
-        ctx.progress)
-    return trial
 
 
 def _baseline_refitted(args: tuple[Context, Circuit, int]) -> FitResult | None:
