@@ -393,6 +393,11 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     diag.baseline_drift = with_parallel(baseline.circuit, baseline.values, prior.design, ctx.drift(baseline)) \
         if prior is not None else []
     diag.drift_alternatives = list(getattr(final, "drift_alternatives", []))
+    first = results.get(chosen[0]) if chosen else None
+    if first is not None:
+        diag.cause_alternatives = [{"cause": r.cause, "delta_bic": float(r.bic - first.bic)} for r in cands
+                                   if r is not first and r.cause not in chosen and "+" not in r.cause
+                                   and abs(r.bic - first.bic) < CAUSE_TIE_DBIC]
     if diag.drift:
         log("values beyond the design tolerance in the final model: "
              + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift
@@ -434,6 +439,12 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     diag.wall_s = time.perf_counter() - t0
     log(f"causes: {', '.join(chosen) or 'none'} (gain {diag.gain:.3f}) in {diag.wall_s:.1f} s", progress)
     return diag
+
+
+#: Two causes whose fits alone are this close in BIC are reported as not told apart by the data
+#: (:attr:`.result.Diagnosis.cause_alternatives`): below 2 the evidence is "not worth more than a bare mention" on
+#: Kass and Raftery's scale.
+CAUSE_TIE_DBIC = 2.0
 
 
 def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], results: dict[str, FitResult],

@@ -89,6 +89,20 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
     return with_parallel(current.circuit, current.values, ctx.prior.design, kept)
 
 
+def parallel_partners(circuit: Circuit, name: str) -> list[str]:
+    """The other elements of ``name``'s kind across the same two nodes (R, L or C; uncoupled inductors): the
+    terminals see only their combination with ``name``."""
+    el = circuit.element(name) if circuit.has_element(name) else None
+    if el is None or el.kind not in "RLC":
+        return []
+    coupled = {n.lower() for e in circuit.elements if e.kind == "K" for n in e.nodes}
+    if el.key in coupled:
+        return []
+    ends = {node_name(n) for n in el.nodes}
+    return [e.name for e in circuit.elements if e.kind == el.kind and e.key != el.key and e.key not in coupled
+            and {node_name(n) for n in e.nodes} == ends]
+
+
 def with_parallel(circuit: Circuit, values: Mapping[str, float], design: Mapping[str, float],
                   drift: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """``drift`` with, for each value that has others of its kind across the same two nodes, ``parallel`` (their
@@ -98,17 +112,14 @@ def with_parallel(circuit: Circuit, values: Mapping[str, float], design: Mapping
     The terminals see only the combination: a capacitance across a section that ends at ground is in parallel with
     that node's capacitance to ground, and a change of either fits the data equally well.
     """
-    coupled = {n.lower() for e in circuit.elements if e.kind == "K" for n in e.nodes}
     fitted = {k.lower(): float(v) for k, v in values.items()}
     out = []
     for d in drift:
         d = dict(d)
-        el = circuit.element(d["name"]) if circuit.has_element(d["name"]) else None
-        if el is not None and el.kind in "RLC" and el.key not in coupled:
-            ends = {node_name(n) for n in el.nodes}
-            group = [e for e in circuit.elements if e.kind == el.kind and e.key != el.key and e.key not in coupled
-                     and {node_name(n) for n in e.nodes} == ends]
-            if group and all(e.key in fitted and design.get(e.key) for e in group):
+        group = [circuit.element(n) for n in parallel_partners(circuit, d["name"])]
+        if group:
+            el = circuit.element(d["name"])
+            if all(e.key in fitted and design.get(e.key) for e in group):
                 combine = (lambda xs: float(sum(xs))) if el.kind == "C" else (lambda xs: 1 / sum(1 / x for x in xs))
                 both = {"design": combine([d["design"]] + [design[e.key] for e in group]),
                         "fitted": combine([d["fitted"]] + [fitted[e.key] for e in group])}
@@ -123,33 +134,52 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple
     """One drifted value freed from the prior, then held at the tolerance's edge (:func:`relaxed_drift`).
 
     ``(ctx, model, freed, drift entry)`` to the entry to report (or None)
-    and a progress line (or ``""``).
+    and a progress line (or ``""``). A value with others of its kind across
+    the same two nodes (:func:`parallel_partners`) is one value with them to
+    the data: they are freed and held together, their combination (a sum of
+    capacitances, of conductances) at the edge, each keeping its share, the
+    hold counted as one parameter. (Held alone, the partner takes the change
+    within its own tolerance, and a node's capacitance 1.3x off passes for
+    two within it.)
     """
     ctx, current, freed, d = args
     name = d["name"]
+    circuit = current.circuit
+    group = [name] + [p for p in parallel_partners(circuit, name)
+                      if p.lower() in ctx.prior.design and p in current.values]
+    keys = {g.lower() for g in group}
     tail = current.x[current_nc(current):]
-    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items()
-                                       if k not in freed and k != name.lower()})
+    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in freed and k not in keys})
+
+    def combined(values: dict[str, float]) -> float:  # the combination's ratio to the design's
+        kind = circuit.element(name).kind
+        comb = (lambda xs: sum(xs)) if kind == "C" else (lambda xs: 1 / sum(1 / x for x in xs))
+        return comb([values[g] for g in group]) / comb([ctx.prior.design[g.lower()] for g in group])
+
     try:
         free_fit = current
-        if name.lower() not in freed:
+        if not keys <= set(freed):
             fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
             free_fit = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60,
                                tol=1e-7)
+            if abs(np.log(combined(free_fit.values))) <= ctx.prior.tau:
+                return None, (f"{name}: x{d['ratio']:.3g} off the design, back within the tolerance once freed"
+                              + (" (with " + ", ".join(group[1:]) + " in parallel)" if len(group) > 1 else "")
+                              + ": not reported")
             moved = ctx.prior.drift({name: free_fit.values[name]})
-            if not moved:
-                return None, (f"{name}: x{d['ratio']:.3g} off the design, back within the tolerance once freed: "
-                              "not reported")
-            d = moved[0]
-        edge = d["design"] * float(np.exp(np.copysign(ctx.prior.tau, np.log(d["ratio"]))))
-        held = free_fit.fitted_circuit().with_values({name: edge})
-        fit = ctx.fit(held, current.effects, fixed=[name], prior=loose, couplings=current.couplings)
+            d = moved[0] if moved else {**d, "fitted": float(free_fit.values[name]),
+                                        "ratio": float(free_fit.values[name] / ctx.prior.design[name.lower()])}
+        ratio = combined(free_fit.values)
+        shift = float(np.exp(np.copysign(ctx.prior.tau, np.log(ratio)))) / ratio
+        held = free_fit.fitted_circuit().with_values({g: free_fit.values[g] * shift for g in group})
+        fit = ctx.fit(held, current.effects, fixed=group, prior=loose, couplings=current.couplings)
         trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), free_fit.x[current_nc(free_fit):]])[None],
                         grid=False, max_nfev=40, tol=1e-6)
     except CANDIDATE_FAILURES:
         return d, ""
-    # the freed fit carries the same prior as the held one (its own value's term left out)
-    d["delta_bic"] = float(trial.bic - free_fit.bic)
+    # the freed fit carries the same prior as the held one (its own value's term left out); the hold is one
+    # parameter however many values in parallel it holds
+    d["delta_bic"] = float(trial.bic - free_fit.bic + (len(group) - 1) * np.log(free_fit.n_residuals))
     if d["delta_bic"] >= DRIFT_MIN_DBIC:
         return d, ""
     return None, (f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "

@@ -150,6 +150,11 @@ def write_report(diag: Diagnosis, directory: str | Path, source: str = "") -> Pa
               f"{_fmt(diag.noise.get('cost', 0.0))}. Selection: {ev.get('criterion', '')}.", ""]
     if data.get("causes") and len(data["causes"]) > 1:
         lines += ["Causes named, in order: " + ", ".join(f"`{c}`" for c in data["causes"]) + ".", ""]
+    tie = data.get("cause_alternatives") or []
+    if tie and data.get("causes"):
+        lines += [f"The data tell `{data['causes'][0]}` only barely from "
+                  + ", ".join(f"`{c['cause']}` (BIC {c['delta_bic']:+.1f} alone)" for c in tie)
+                  + ": less than 2 in BIC, not worth more than a bare mention.", ""]
     if not data.get("explained", True):
         lines += [("No cause tried explains the data" if not data.get("causes") else "The causes named do not explain "
                    "all of the data") + f": the returned model stays above twice the noise floor. {data.get('misfit', '')}"

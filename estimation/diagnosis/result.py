@@ -49,6 +49,10 @@ class Diagnosis(DiagnosisOutcome):
     baseline_drift: list[dict[str, Any]] = field(default_factory=list)
     #: Other values off the design that explain the data as well as the one reported (:func:`.drift.located_drift`).
     drift_alternatives: list[dict[str, Any]] = field(default_factory=list)
+    #: Causes whose fit alone is within :data:`.diagnose.CAUSE_TIE_DBIC` in BIC of the first cause named (``cause``,
+    #: ``delta_bic``): the data do not tell them apart (a skin effect's and a lamination's impedance both grow as
+    #: ``(1 + j) sqrt(f)`` well above their corners).
+    cause_alternatives: list[dict[str, Any]] = field(default_factory=list)
     tolerance: float = float("inf")
     #: The returned model fits within :data:`.verdict.FIT_FACTOR` times the noise floor (:mod:`.verdict`).
     explained: bool = True
@@ -93,6 +97,7 @@ class Diagnosis(DiagnosisOutcome):
             "drift": list(self.drift),
             "baseline_drift": list(self.baseline_drift),
             "drift_alternatives": list(self.drift_alternatives),
+            "cause_alternatives": list(self.cause_alternatives),
             "noise_floor": self.noise.get("cost", 0.0),
             "noise": self.noise,
             "unexplained": self.unexplained,

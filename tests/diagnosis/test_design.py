@@ -126,7 +126,10 @@ def test_skin_effect_named_beside_a_doubled_capacitance():
     d = diagnose_frequency(case.frequency_hz, case.measured, circuit=parse_netlist(case.baseline_netlist),
                            port=case.port, progress=False, tolerance=0.2)
     assert case.truth["drift"] == ["C6"]
-    assert d.causes == ["skin-effect"], d.candidates()
+    # a lamination's loss grows as (1 + j) sqrt(f) above its corner, as a skin effect's does: when the two fits
+    # alone are within 2 in BIC, the other is named and the skin effect reported as not told apart from it
+    tied = [c["cause"] for c in d.cause_alternatives]
+    assert d.causes == ["skin-effect"] or (d.causes == ["core-loss"] and "skin-effect" in tied), d.candidates()
     assert [x["name"] for x in d.drift] == ["C6"] and 1.6 < d.drift[0]["ratio"] < 2.5
 
 
