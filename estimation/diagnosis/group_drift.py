@@ -43,7 +43,7 @@ import numpy as np
 
 from pris_cosim.circuits.circuit import GROUND
 
-from estimation.diagnosis.drift import DRIFT_MIN_DBIC
+from estimation.diagnosis.drift import DRIFT_MIN_DBIC, parallel_partners
 from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, configuration_ports, current_nc
 from estimation.diagnosis.prior import DesignPrior
 
@@ -99,8 +99,7 @@ def member_shares(circuit: Any, members: Sequence[str]) -> dict[str, float]:
     off); every other member on the factor itself. With fewer than two members without such a partner, every member
     counts fully.
     """
-    caps = {e.name: frozenset(e.nodes) for e in circuit.elements if e.kind == "C"}
-    shared = {m for m in members if any(o != m and e == caps.get(m) for o, e in caps.items())}
+    shared = {m for m in members if parallel_partners(circuit, m)}
     if len(members) - len(shared) < 2:
         shared = set()
     return {m: 0.5 if m in shared else 1.0 for m in members}
@@ -201,10 +200,9 @@ def group_drift(ctx: Any, r: FitResult, log: Callable[[str], None], tried: list[
     if ctx.prior is None:
         return None
     best = None
-    caps = {e.name: frozenset(e.nodes) for e in r.circuit.elements if e.kind == "C"}
     for role, members in value_groups(ctx.prior, r.circuit, configuration_ports(ctx.configs)).items():
         shares = member_shares(r.circuit, members)
-        shared = [m for m in members if any(o != m and e == caps.get(m) for o, e in caps.items())]
+        shared = [m for m in members if parallel_partners(r.circuit, m)]
         try:
             fitted, s = _factor_fit(ctx, r, shares)
         except CANDIDATE_FAILURES:
