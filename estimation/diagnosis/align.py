@@ -36,20 +36,20 @@ ALIGN_NFEV = 60
 BAND_MARGIN = 1.5
 
 
-def port_modes(fit: FrequencyFit, x: np.ndarray, index: int, f_lo: float, f_hi: float
+def port_roots(fit: FrequencyFit, x: np.ndarray, index: int, f_lo: float, f_hi: float
                ) -> tuple[np.ndarray, np.ndarray]:
-    """Parallel and series resonance frequencies (Hz, ascending) of configuration ``index``'s port impedance.
+    """Poles and zeros (rad/s, complex, ascending in frequency) of configuration ``index``'s port impedance.
 
     The poles of ``Z(s)`` (a current driven into the port) and its
     invariant zeros (the finite generalised eigenvalues of the Rosenbrock
-    pencil ``[[A, B], [C, D]]``), with positive imaginary part, as
-    ``Im / 2 pi``, within ``f_lo / BAND_MARGIN .. f_hi * BAND_MARGIN``.
+    pencil ``[[A, B], [C, D]]``), those with positive imaginary part whose
+    ``Im / 2 pi`` is within ``f_lo / BAND_MARGIN .. f_hi * BAND_MARGIN``.
     """
     values = fit.circuit.resolve(fit.overrides(x), check=False)
     A, B, C, D = fit.models[index].port_system(values)
     n = A.shape[0]
     if n == 0:
-        return np.zeros(0), np.zeros(0)
+        return np.zeros(0, complex), np.zeros(0, complex)
     poles = np.linalg.eigvals(A)
     pencil = np.zeros((n + 1, n + 1))
     pencil[:n, :n] = np.eye(n)
@@ -58,10 +58,19 @@ def port_modes(fit: FrequencyFit, x: np.ndarray, index: int, f_lo: float, f_hi: 
     zeros = zeros[np.isfinite(zeros)]
 
     def band(v: np.ndarray) -> np.ndarray:
-        fr = v[v.imag > 0].imag / (2 * np.pi)
-        return np.sort(fr[(fr > f_lo / BAND_MARGIN) & (fr < f_hi * BAND_MARGIN)])
+        v = v[v.imag > 0]
+        fr = v.imag / (2 * np.pi)
+        v = v[(fr > f_lo / BAND_MARGIN) & (fr < f_hi * BAND_MARGIN)]
+        return v[np.argsort(v.imag)]
 
     return band(poles), band(zeros)
+
+
+def port_modes(fit: FrequencyFit, x: np.ndarray, index: int, f_lo: float, f_hi: float
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Parallel and series resonance frequencies (Hz, ascending) of configuration ``index``'s port impedance:
+    the imaginary parts of :func:`port_roots` over ``2 pi``."""
+    return tuple(v.imag / (2 * np.pi) for v in port_roots(fit, x, index, f_lo, f_hi))
 
 
 def _impedances(fit: FrequencyFit) -> list[tuple[int, str]]:

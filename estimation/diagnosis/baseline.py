@@ -12,6 +12,7 @@ from pris_cosim.models.builtin import Model, lumped_rlc
 from estimation.diagnosis.align import aligned_start
 from estimation.diagnosis.cores import SharedBatch, helper_available
 from estimation.diagnosis.fit import DiagnosisError, FitResult, FrequencyFit
+from estimation.diagnosis.realign import realigned
 
 
 def lumped_from_data(f: np.ndarray, z: np.ndarray) -> list[Model]:
@@ -35,7 +36,8 @@ BASELINE_SPREAD = 0.3
 
 
 def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: float = BASELINE_SPREAD,
-                   max_nfev: int = 200, good_enough: float = 0.0, x0: np.ndarray | None = None) -> FitResult:
+                   max_nfev: int = 200, good_enough: float = 0.0, x0: np.ndarray | None = None,
+                   floor: float | None = None) -> FitResult:
     """The baseline's values fitted from the given values and, unless that fit is good enough, from random starts.
 
     The fit from the given values is continued from smoothed errors
@@ -64,6 +66,10 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     x0 : numpy.ndarray, optional
         The start vector (default: the circuit at its values, the effects at
         their first grid start).
+    floor : float, optional
+        The noise floor's cost. Given, a fit that ends above ``good_enough``
+        has its modes moved onto where it misses the data
+        (:func:`.realign.realigned`).
     """
     x0 = fit.start_vectors()[0] if x0 is None else np.asarray(x0, float)
     # with a helper process (:mod:`.cores`), the random starts' short fits are handed to it before the fit from the
@@ -73,13 +79,16 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     if first.objective <= good_enough or starts <= 0:
         if batch is not None:
             batch.cancel()
-        return first
-    short = (batch or _StartsFitted(fit, x0, starts, spread, max_nfev)).result()
-    if short.objective >= first.objective:
-        return first
-    best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)
-    best.wall_s += first.wall_s + short.wall_s
-    best.alternative = first  # the optimum reached from the given values: structures are sought from it too
+        best = first
+    else:
+        short = (batch or _StartsFitted(fit, x0, starts, spread, max_nfev)).result()
+        best = first
+        if short.objective < first.objective:
+            best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)
+            best.wall_s += first.wall_s + short.wall_s
+            best.alternative = first  # the optimum reached from the given values: structures are sought from it too
+    if floor is not None and best.objective > good_enough:
+        best = realigned(fit, best, floor, good_enough)
     return best
 
 

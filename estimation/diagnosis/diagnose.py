@@ -232,7 +232,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         prior = design_prior(dict(zip(design.free, design.start)), tolerance, floor["cost"], f.size, len(data),
                              model.circuit)
         baseline = fit_multistart(FrequencyFit(model.circuit, list(model.configurations.values()), f, data, fixed,
-                                               prior=prior, weights=weights), good_enough=NOISE_MARGIN * floor["cost"])
+                                               prior=prior, weights=weights), good_enough=NOISE_MARGIN * floor["cost"],
+                                  floor=floor["cost"])
         log(f"baseline {model.name} fitted: cost {baseline.cost:.4g} in {baseline.wall_s:.1f} s", progress)
     worst = max(float(np.sqrt(np.mean(np.abs(e) ** 2))) for e in baseline.errors.values())
     if worst > MAX_BASELINE_RMS:
