@@ -239,7 +239,7 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
         t = time.perf_counter()
         try:
             again = ctx.fit(first.fitted_circuit(), effects, couplings=first.couplings_freed)
-            res = fit_multistart(again, starts=SPLIT_STARTS, good_enough=NOISE_MARGIN * ctx.floor,
+            res = fit_multistart(again, starts=SPLIT_STARTS, good_enough=NOISE_MARGIN * ctx.floor, floor=ctx.floor,
                                  x0=np.concatenate([np.zeros(again.nc), first.x[again.nc:]]))
         except CANDIDATE_FAILURES:
             continue
