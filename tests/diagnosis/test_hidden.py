@@ -76,6 +76,7 @@ def test_cli_json_has_steps_and_noise_floor(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_two_winding_thesis_skin_effect_on_hv_only():
     """hv-4section, six responses: R(f) of the HV sections in thesis (2.6)'s real-valued form, own scale."""
     from hidden_cases import two_winding_case

@@ -187,6 +187,7 @@ def test_quick_study_resumes_without_rerunning(quick_study, capsys):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_study_on_measured_csv(tmp_path, capsys):
     """A user's own six responses (here analytic, of the Case 1 structure) through --measured, one case."""
     f = np.logspace(1, 5, 161)

@@ -91,6 +91,7 @@ def test_clean_winding_record_gives_none(clean_record):
 
 @needs_ngspice
 @pytest.mark.slow
+@pytest.mark.long
 def test_core_loss_in_the_winding_record_is_named(tmp_path):
     rec = _record(core_loss=True)
     path = tmp_path / "rec.csv"
