@@ -103,6 +103,13 @@ def _pair_factor(jw: np.ndarray, root: complex, shift: np.ndarray) -> np.ndarray
     return (np.log((jw - r1) * (jw - np.conj(r1))) - np.log((jw - root) * (jw - np.conj(root))))
 
 
+def _pair_residuals(uv: np.ndarray, e: np.ndarray, jw: np.ndarray, pole: complex, zero: complex) -> np.ndarray:
+    """The log error ``e`` left with the pole shifted by ``exp(uv[0])`` and the zero by ``exp(uv[1])``
+    (real and imaginary parts)."""
+    d = e - _pair_factor(jw, pole, uv[:1])[0] + _pair_factor(jw, zero, uv[1:])[0]
+    return np.concatenate([d.real, d.imag])
+
+
 def _moves(fit: FrequencyFit, x: np.ndarray, found: list[tuple[int, float, float]], r: FitResult
            ) -> list[tuple]:
     """The mode moves to try: ``(configuration, pole index, pole target, zero index, zero target)`` (rad/s).
@@ -141,12 +148,8 @@ def _moves(fit: FrequencyFit, x: np.ndarray, found: list[tuple[int, float, float
             # the model's error after the shift: e - ln(pole factor) + ln(zero factor), over the grid of both shifts
             left = np.sum(np.abs(e[None, None, :] - fp[:, None, :] + fz[None, :, :]) ** 2, axis=2)
             a, b = np.unravel_index(int(np.argmin(left)), left.shape)
-
-            def resid(uv: np.ndarray, k=k, j=j) -> np.ndarray:
-                d = e - _pair_factor(jw, poles[k], uv[:1])[0] + _pair_factor(jw, zeros[j], uv[1:])[0]
-                return np.concatenate([d.real, d.imag])
-
-            sol = least_squares(resid, [grid[a], grid[b]], bounds=([-window] * 2, [window] * 2), max_nfev=50)
+            sol = least_squares(_pair_residuals, [grid[a], grid[b]], bounds=([-window] * 2, [window] * 2),
+                                max_nfev=50, args=(e, jw, poles[k], zeros[j]))
             gain = float(np.sum(np.abs(e) ** 2) - 2 * sol.cost)
             scored.append((gain, (i, k, poles[k] * np.exp(sol.x[0]), j, zeros[j] * np.exp(sol.x[1]))))
         if scored:
