@@ -76,13 +76,12 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
     # given values runs here (the result does not depend on the order), and given up if that fit is good enough
     batch = _StartsFitted(fit, x0, starts, spread, max_nfev) if starts > 0 and helper_available() else None
     first = fit.fit_continued(x0, max_nfev=max_nfev)
+    best = first
     if first.objective <= good_enough or starts <= 0:
         if batch is not None:
             batch.cancel()
-        best = first
     else:
         short = (batch or _StartsFitted(fit, x0, starts, spread, max_nfev)).result()
-        best = first
         if short.objective < first.objective:
             best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)
             best.wall_s += first.wall_s + short.wall_s

@@ -37,9 +37,9 @@ the truth's values reached it, every such fit reached the truth's level.
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares, linear_sum_assignment
+from scipy.optimize import least_squares
 
-from estimation.diagnosis.align import PULL, UNPAIRED, _impedances, port_modes, port_roots
+from estimation.diagnosis.align import PULL, _impedances, _paired, port_modes, port_roots
 from estimation.diagnosis.cores import shared_map
 from estimation.diagnosis.fit import FitResult, FrequencyFit
 
@@ -182,13 +182,7 @@ def moved(fit: FrequencyFit, x: np.ndarray, move: tuple, pulled: bool = True) ->
 
     def residuals(xc: np.ndarray) -> np.ndarray:
         v = np.concatenate([xc, np.asarray(x, float)[fit.nc:]])
-        parts = []
-        for model, want in zip(port_modes(fit, v, i, lo_f, hi_f), held):
-            d = np.full(want.size, UNPAIRED)
-            if want.size and model.size:
-                rows, cols = linear_sum_assignment(np.abs(np.log(model[None, :] / want[:, None])))
-                d[rows] = np.log(model[cols] / want[rows])
-            parts.append(d)
+        parts = [_paired(want, model) for model, want in zip(port_modes(fit, v, i, lo_f, hi_f), held)]
         parts.append(pull * (xc - start))
         return np.concatenate(parts)
 
