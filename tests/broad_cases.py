@@ -130,6 +130,8 @@ class Case:
     noise: float
     fmt: str
     extra: dict = field(default_factory=dict)
+    clean: np.ndarray | None = None  # the response without noise
+    design: Winding | None = None
 
 
 def _netlist(w: Winding, title: str) -> str:
@@ -208,11 +210,92 @@ def draw(seed: int, effect: str | None = None, points: int | None = None) -> Cas
         extra["split"] = j + 1
         truth = _split(truth, j, rng.uniform(0.35, 0.65), rng)
         drift = None
-    z = zin(truth, f, r_of_f, l_factor)
-    z = z * np.exp(noise / np.sqrt(2) * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)))
+    extra["truth"] = truth
+    clean = zin(truth, f, r_of_f, l_factor)
+    z = clean * np.exp(noise / np.sqrt(2) * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)))
     fmt = "s1p" if rng.random() < 0.3 else "csv"
     return Case(f"broad_{seed}_{effect}", effect, f, z, _netlist(design, f"design, {n} sections"), "n1", causes,
-                None if effect in ("skin", "coreloss", "split") else drift, noise, fmt, extra)
+                None if effect in ("skin", "coreloss", "split") else drift, noise, fmt, extra, clean, design)
+
+
+def _solve_many(R, L, Cs, Cg, K, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A winding without effects at every frequency in one batched solve: the port impedance (Ohm) and the
+    solution ``x`` (node voltages, then branch currents) for a unit current into node 0."""
+    n = R.size
+    s = 2j * np.pi * f[:, None, None]
+    conn = np.eye(n) - np.eye(n, k=-1)  # incidence: branch i leaves node i, enters node i+1
+    ycs = Cs[:-1]
+    Yc = np.diag(Cg + Cs + np.concatenate([[0.0], ycs])) - np.diag(ycs, 1) - np.diag(ycs, -1)
+    M = np.zeros((f.size, 2 * n, 2 * n), complex)
+    M[:, :n, :n] = s * Yc
+    M[:, :n, n:] = conn
+    M[:, n:, :n] = conn.T
+    M[:, n:, n:] = -(np.diag(R) + s * (K * np.sqrt(np.outer(L, L))))
+    rhs = np.zeros((f.size, 2 * n, 1), complex)
+    rhs[:, 0, 0] = 1.0
+    x = np.linalg.solve(M, rhs)[:, :, 0]
+    return x[:, 0], x
+
+
+def _log_z_and_gradient(v: np.ndarray, K: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``ln Z`` of the values ``v = [R, L, Cs, Cg]`` and its derivatives by ``ln v`` (columns).
+
+    The nodal matrix ``M`` is symmetric, so ``dZ = -x^T dM x`` with ``x = M^-1 e_0`` (one solve for all).
+    """
+    n = K.shape[0]
+    R, L, Cs, Cg = v[:n], v[n:2 * n], v[2 * n:3 * n], v[3 * n:]
+    z, x = _solve_many(R, L, Cs, Cg, K, f)
+    s = 2j * np.pi * f[:, None]
+    u, i = x[:, :n], x[:, n:]
+    du = u - np.concatenate([u[:, 1:], np.zeros((f.size, 1))], axis=1)  # across section k: node k minus node k+1
+    lm = K * np.sqrt(np.outer(L, L))
+    dz = np.concatenate([R * i ** 2, s * i * (i @ lm), -s * Cs * du ** 2, -s * Cg * u ** 2], axis=1)
+    return np.log(z), dz / z[:, None]
+
+
+#: An effect whose :func:`signature` is below this is hidden in the noise: a likelihood-ratio test of two added
+#: parameters at a false-alarm rate of 1e-3 (threshold 13.8) finds a signature of 25 nine times in ten, and one of
+#: 10 only a third of the time.
+VISIBLE = 25.0
+
+
+def signature(case: Case, tolerance: float = 0.2, max_nfev: int = 400) -> float:
+    """How far the hidden effect stands out of the noise once the design's own model has taken what it can.
+
+    The design's structure (no effect, no split) with every ``R``, ``L``, ``Cs``, ``Cg`` free within the
+    tolerance (``|ln(v/d)| <= ln(1 + tolerance)``) is fitted by least squares to the response without noise,
+    from the truth's values where they exist (else the design's); returned is the misfit left in units of the
+    noise, the non-centrality ``lambda = sum_k |ln Z_k - ln Z'_k|^2 / (sigma^2 / 2)`` of a chi-square test of
+    the design model against the data (``sigma`` the noise's RMS of ``ln Z``, half of it in each of the real and
+    imaginary parts). A local fit: ``lambda`` is an upper bound of the least misfit, so an effect called hidden
+    (small ``lambda``) is hidden.
+    """
+    from scipy.optimize import least_squares
+
+    d = case.design
+    n = d.n
+    t = case.extra.get("truth")
+    tau = np.log1p(tolerance)
+    base = np.concatenate([d.R, d.L, d.Cs, d.Cg])
+    x0 = np.zeros(base.size)
+    if t is not None and t.n == n:
+        x0 = np.clip(np.log(np.concatenate([t.R, t.L, t.Cs, t.Cg]) / base), -tau, tau)
+    target = np.log(case.clean)
+
+    def res(x):
+        e = _log_z_and_gradient(base * np.exp(x), d.K, case.frequency_hz)[0] - target
+        e.imag = (e.imag + np.pi) % (2 * np.pi) - np.pi
+        return np.concatenate([e.real, e.imag])
+
+    def jac(x):
+        g = _log_z_and_gradient(base * np.exp(x), d.K, case.frequency_hz)[1]
+        return np.concatenate([g.real, g.imag])
+
+    best = res(x0)
+    fit = least_squares(res, x0, jac=jac, bounds=(-tau, tau), max_nfev=max_nfev, x_scale=0.05)
+    if fit.cost * 2 < best @ best:
+        best = fit.fun
+    return float(best @ best / (case.noise ** 2 / 2))
 
 
 def reported_drift(drift: list[dict], truth: list[str] | None = None) -> set[str]:
