@@ -115,7 +115,7 @@ def main() -> None:
                 + ("" if r["ok"] or not _excused(r) else f" (hidden: signature {r['signature']:.2g})"), flush=True)
             clean = [r for r in rows if r["effect"] == "none"]
             alarms = sum(bool(r["causes"]) for r in rows if not r["truth"])
-            hidden = [r for r in rows if r["signature"] < VISIBLE]
+            hidden = [r for r in rows if r["effect"] != "none" and r["signature"] < VISIBLE]
             print(f"right {sum(r['ok'] for r in rows)}/{len(rows)}; effects hidden in the noise {len(hidden)} "
                   f"(signature < {VISIBLE:g}: the design's model within the tolerance fits them); right or hidden and "
                   f"answered none {sum(_excused(r) for r in rows)}/{len(rows)}")

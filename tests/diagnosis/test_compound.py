@@ -121,6 +121,7 @@ def test_missing_section_of_two_alike_sections_is_named():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_missing_section_held_out_past_a_sharp_resonance():
     """Sections 3 and 4 of seven merged. The baseline reaches 1.1 x the floor only with Cg4 at 0.3 x its design
     value; the split reaches the noise within the design (dBIC 287). Refitted on every other point, the split moved

@@ -164,7 +164,7 @@ def test_fmu_estimate_recovers_and_resumes(tmp_path, two_record):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("approach", ["iemd", "emd", "frequency"])
+@pytest.mark.parametrize("approach", ["iemd", "emd", pytest.param("frequency", marks=pytest.mark.long)])
 def test_fmu_estimate_other_approaches_with_a_current_input(tmp_path, approach):
     """The DUT FMU driven by the recorded current (linear input): time, EMD, IEMD and Welch H1."""
     w = fmu_record(TWO_PRIS, 1e6, 0.05 if approach == "frequency" else 0.01)

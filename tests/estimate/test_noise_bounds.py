@@ -138,7 +138,7 @@ def test_bound_of_the_ill_conditioned_three_section_record_follows_the_monte_car
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("approach", ["time", "frequency"])
+@pytest.mark.parametrize("approach", ["time", pytest.param("frequency", marks=pytest.mark.long)])
 def test_one_seed_at_40_db_reaches_the_bound_rule(approach):
     """At 40 dB SNR one seed of the approach (PSO + local, RMSE cost) ends with every parameter within
     max(5 %, 3 x its Cramer-Rao bound) of the thesis's Table 4.7 values."""
