@@ -13,6 +13,10 @@ temporary folder, read back as a user's file and diagnosed against its design
 netlist (tolerance 0.2). A case is right when the causes named equal the
 truth's and, where the truth gives the drift, the values reported beyond the
 tolerance equal it (a group's drift: the members of the group reported).
+Some draws hide their effect: the design's model within the tolerance fits
+them (:func:`broad_cases.signature`, measured without the diagnosis); the
+table counts those apart, and a second share takes such a draw as right
+when it is answered with nothing (no cause, no drift).
 
 Prints one row per draw, then the share right, the false alarms (a cause
 named on a draw with none), the clean draws with drift reported, and the
