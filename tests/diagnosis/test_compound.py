@@ -113,6 +113,7 @@ def test_split_that_leaves_values_off_the_design_seeks_the_skin_effect():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_missing_section_of_two_alike_sections_is_named():
     """Sections 3 and 4 of six merged, their values alike: the baseline stops at 2.4 x the floor with Cg3 at 2.4 x
     its design value. Only the plain split of the design (equal halves, equal capacitances) leads a local fit to the

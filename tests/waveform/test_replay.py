@@ -140,13 +140,14 @@ CASES = [  # name, baseline, source (R, L, C), true causes
     ("source_drift", "load", (57.1, 1e-3, 4e-6), {"component-drift"}),
     ("source_none", "load", (57.1, 1e-3, 4e-6), set()),
     ("source_ringing", "load", (57.1, 1e-3, 4e-6), {"series-resistance", "switch-ringing"}),
-    ("three_section_ngspice_10MHz", "three-section", (150.0, 4e-3, 1e-6), set()),
+    pytest.param("three_section_ngspice_10MHz", "three-section", (150.0, 4e-3, 1e-6), set(), marks=pytest.mark.long,
+                 id="three_section_ngspice_10MHz"),
     ("three_section_stray_10MHz", "three-section", (150.0, 4e-3, 1e-6), {"stray-capacitance"}),
 ]
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name,baseline,src,truth", CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize("name,baseline,src,truth", CASES, ids=[getattr(c, "id", None) or c[0] for c in CASES])
 def test_the_recorded_cases_through_the_command(tmp_path, name, baseline, src, truth):
     path = tmp_path / f"{name}.csv"
     with gzip.open(DATA / f"{name}.csv.gz", "rb") as fin, open(path, "wb") as fout:
