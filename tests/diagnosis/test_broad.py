@@ -73,9 +73,6 @@ def test_clean_eight_section_design_on_500_points_is_none_without_drift(tmp_path
 
 #: Measured wrong, with the reason (docs/diagnosis-design.md, "Broad draws").
 KNOWN_WRONG = {
-    "cg_scale": "every capacitance to ground x1.56: the baseline's fit stops at 11 x the noise floor and the group's "
-                "fit from the design values scaled does not leave that optimum (dBIC -3.2): unexplained, with three "
-                "of the six reported one by one",
     "split": "section 4 of six split: unexplained at 3.46 x the noise floor, no split found from the fitted values",
 }
 

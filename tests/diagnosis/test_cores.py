@@ -130,7 +130,7 @@ import hidden_cases as hc
 from estimation.diagnosis import diagnose_frequency
 from pris_cosim.circuits.netlist import parse_netlist
 
-case = hc.one_port_case(("skin-effect",), 7, sections=3)
+case = hc.one_port_case(("skin-effect",), 7, sections=5)
 d = diagnose_frequency(case.frequency_hz, case.measured, circuit=parse_netlist(case.baseline_netlist), port="n1",
                        progress=False)
 final = d.best or d.baseline
