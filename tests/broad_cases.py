@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import least_squares
 from scipy.special import jve
 
 EFFECTS = ("none", "skin", "coreloss", "cg_scale", "local", "split", "beyond")
@@ -132,6 +133,7 @@ class Case:
     extra: dict = field(default_factory=dict)
     clean: np.ndarray | None = None  # the response without noise
     design: Winding | None = None
+    truth: Winding | None = None  # the winding the response is of (a split: one section more)
 
 
 def _netlist(w: Winding, title: str) -> str:
@@ -210,12 +212,11 @@ def draw(seed: int, effect: str | None = None, points: int | None = None) -> Cas
         extra["split"] = j + 1
         truth = _split(truth, j, rng.uniform(0.35, 0.65), rng)
         drift = None
-    extra["truth"] = truth
     clean = zin(truth, f, r_of_f, l_factor)
     z = clean * np.exp(noise / np.sqrt(2) * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)))
     fmt = "s1p" if rng.random() < 0.3 else "csv"
     return Case(f"broad_{seed}_{effect}", effect, f, z, _netlist(design, f"design, {n} sections"), "n1", causes,
-                None if effect in ("skin", "coreloss", "split") else drift, noise, fmt, extra, clean, design)
+                None if effect in ("skin", "coreloss", "split") else drift, noise, fmt, extra, clean, design, truth)
 
 
 def _solve_many(R, L, Cs, Cg, K, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -270,11 +271,9 @@ def signature(case: Case, tolerance: float = 0.2, max_nfev: int = 400) -> float:
     imaginary parts). A local fit: ``lambda`` is an upper bound of the least misfit, so an effect called hidden
     (small ``lambda``) is hidden.
     """
-    from scipy.optimize import least_squares
-
     d = case.design
     n = d.n
-    t = case.extra.get("truth")
+    t = case.truth
     tau = np.log1p(tolerance)
     base = np.concatenate([d.R, d.L, d.Cs, d.Cg])
     x0 = np.zeros(base.size)
@@ -282,14 +281,23 @@ def signature(case: Case, tolerance: float = 0.2, max_nfev: int = 400) -> float:
         x0 = np.clip(np.log(np.concatenate([t.R, t.L, t.Cs, t.Cg]) / base), -tau, tau)
     target = np.log(case.clean)
 
+    last: dict[bytes, tuple] = {}
+
+    def solved(x):  # the residuals and their Jacobian from one solve (least_squares asks for both at each x)
+        key = x.tobytes()
+        if key not in last:
+            lz, g = _log_z_and_gradient(base * np.exp(x), d.K, case.frequency_hz)
+            e = lz - target
+            e.imag = (e.imag + np.pi) % (2 * np.pi) - np.pi
+            last.clear()
+            last[key] = (np.concatenate([e.real, e.imag]), np.concatenate([g.real, g.imag]))
+        return last[key]
+
     def res(x):
-        e = _log_z_and_gradient(base * np.exp(x), d.K, case.frequency_hz)[0] - target
-        e.imag = (e.imag + np.pi) % (2 * np.pi) - np.pi
-        return np.concatenate([e.real, e.imag])
+        return solved(x)[0]
 
     def jac(x):
-        g = _log_z_and_gradient(base * np.exp(x), d.K, case.frequency_hz)[1]
-        return np.concatenate([g.real, g.imag])
+        return solved(x)[1]
 
     best = res(x0)
     fit = least_squares(res, x0, jac=jac, bounds=(-tau, tau), max_nfev=max_nfev, x_scale=0.05)
