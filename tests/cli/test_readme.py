@@ -19,7 +19,8 @@ from readme_commands import README, readme_commands, run_readme_command
 #: Commands quick enough for the default run (seconds each).
 FAST = ("pris-cosim models", "pris-cosim frf ", "pris-cosim simulate ", "pris-cosim build-fmu ")
 #: Commands that another test runs as written, from the same kind of directory, and checks further (not run twice).
-RUN_ELSEWHERE = {"pris-cosim study hv-transformer --quick": "test_hv_transformer.py's quick_study fixture"}
+RUN_ELSEWHERE = {"pris-cosim study hv-transformer --quick": "test_hv_transformer.py's quick_study fixture",
+                 "pris-cosim study two-section --quick": "test_studies.py's acceptance test"}
 #: Commands of minutes each (CI leaves them out with the other ``long`` tests).
 LONG = ("pris-cosim study three-section",)
 
