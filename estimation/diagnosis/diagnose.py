@@ -101,7 +101,7 @@ from estimation.diagnosis.causes.section_fits import fit_missing_section, sectio
 from estimation.diagnosis.causes.single import single_causes, start_tails
 from estimation.diagnosis.causes.unmerge import missing_modes, resolved_points
 from estimation.diagnosis.verdict import explains, misfit_sentence
-from estimation.diagnosis.group_drift import group_drift
+from estimation.diagnosis.group_drift import group_drift, value_without_group
 from estimation.diagnosis.context import (MAX_BASELINE_RMS, NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR,
     UNMERGE_ABOVE_FLOOR, Context, log)
 
@@ -298,6 +298,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             and (not ctx.explained(baseline) or ctx.drift(baseline))):
         group = group_drift(ctx, baseline, lambda m: log(m, progress))  # sought again on the baseline refitted
     # ---- the group's drift, then one value off the design, weighed against every single cause
+    prior_before = ctx.prior
     baseline, group_entry, answered, located_on = _drift_answer(ctx, baseline, group, results, failed, None,
                                                                  bool(passes))
     prior = ctx.prior
@@ -385,6 +386,15 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                 extended = located
             else:
                 baseline = located
+                if group_entry is not None:  # the group with the value on top of it, against the value alone
+                    alone = value_without_group(ctx, prior_before, located)
+                    g_bic = located.bic + np.log(located.n_residuals)  # the group's factor one parameter more
+                    if alone is not None and alone.bic <= g_bic:
+                        log(f"{located.freed} alone off the design: BIC {g_bic - alone.bic:.1f} below "
+                            f"{group_entry['name']} x{group_entry['ratio']:.3g} with it: not the group", progress)
+                        alone.structure = located.structure
+                        baseline, group_entry = alone, None
+                        ctx.prior = prior = prior_before
     cands = sorted(results.values(), key=lambda r: r.bic)
     diag = Diagnosis(chosen[0] if chosen else "none", baseline, extended, cands, f, data, causes=chosen, steps=steps,
                      noise=floor, failed=failed)

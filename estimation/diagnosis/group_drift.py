@@ -240,3 +240,31 @@ def group_drift(ctx: Any, r: FitResult, log: Callable[[str], None], tried: list[
         if best is None or fitted.bic < best[0].bic:
             best = (fitted, rescaled(ctx.prior, shares, s), entry)
     return best
+
+
+def value_without_group(ctx: Any, prior: DesignPrior, located: FitResult) -> FitResult | None:
+    """The backward step of a group once one value is found off the design on top of it.
+
+    ``located`` (:func:`.drift.located_drift` on the group's model: the
+    value ``located.freed`` freed, the others' prior centred on the group's
+    factor) is refitted from its own values under ``prior`` (the design's,
+    the group dropped), the same value freed. A group of six capacitances to
+    ground at x1.32 with one of them at x2.1 on top is one capacitance off
+    the design when this fit's BIC is no higher than the group's with its
+    factor counted (:func:`.diagnose._diagnose` compares them).
+
+    Returns
+    -------
+    FitResult or None
+        The refitted model (``freed`` set), or None when the fit fails.
+    """
+    name = located.freed
+    loose = replace(prior, design={n: v for n, v in prior.design.items() if n != name.lower()})
+    try:
+        fit = ctx.fit(located.fitted_circuit(), located.effects, prior=loose, couplings=located.couplings)
+        trial = fit.fit_continued(np.concatenate([np.zeros(fit.nc), located.x[current_nc(located):]]),
+                                  max_nfev=100, tol=1e-7)
+    except CANDIDATE_FAILURES:
+        return None
+    trial.freed = name
+    return trial
