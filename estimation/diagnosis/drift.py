@@ -110,16 +110,14 @@ def _fewest_needed(ctx: Any, current: FitResult, freed: list[str], kept: list[di
              and not parallel_partners(current.circuit, d["name"])]
     if len(names) < 2:
         return kept
-    tau = ctx.prior.tau
     tail = current.x[current_nc(current):]
+    keys = {n.lower() for n in names} | set(freed)
+    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in keys})
 
-    def fitted(free: list[str]) -> FitResult | None:
+    def fitted(free: list[str]) -> FitResult | None:  # the values not in ``free`` held at the nearest edge
         held = [n for n in names if n not in free]
-        keys = {n.lower() for n in names} | set(freed)
-        loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in keys})
-        edge = {n: ctx.prior.design[n.lower()] * float(np.exp(np.clip(np.log(current.values[n]
-                                                                              / ctx.prior.design[n.lower()]), -tau, tau)))
-                for n in held}
+        edge = {n: ctx.prior.design[n.lower()] * float(np.exp(np.clip(
+            np.log(current.values[n] / ctx.prior.design[n.lower()]), -ctx.prior.tau, ctx.prior.tau))) for n in held}
         try:
             fit = ctx.fit(current.fitted_circuit().with_values(edge), current.effects, fixed=held, prior=loose,
                           couplings=current.couplings)
@@ -130,21 +128,16 @@ def _fewest_needed(ctx: Any, current: FitResult, freed: list[str], kept: list[di
             return None
         return other if other.objective < best.objective else best
 
-    every = fitted(list(names))
-    if every is None:
+    every, now = fitted(list(names)), fitted([])
+    if every is None or now is None:
         return kept
     chosen: list[str] = []
-    while len(chosen) < len(names):
-        now = fitted(chosen)
-        if now is None:
-            return kept
-        if now.bic - every.bic < DRIFT_MIN_DBIC:
-            break
-        trials = [(fitted(chosen + [n]), n) for n in names if n not in chosen]
-        trials = [(t, n) for t, n in trials if t is not None]
+    while len(chosen) < len(names) and now.bic - every.bic >= DRIFT_MIN_DBIC:
+        trials = [(t, n) for t, n in ((fitted(chosen + [n]), n) for n in names if n not in chosen) if t is not None]
         if not trials:
             return kept
-        chosen.append(min(trials, key=lambda t: t[0].bic)[1])
+        now, name = min(trials, key=lambda t: t[0].bic)
+        chosen.append(name)
     dropped = [n for n in names if n not in chosen]
     if dropped:
         log(f"{', '.join(dropped)}: held within the tolerance together"
@@ -250,7 +243,7 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple
                   f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
 
 
-def _freed_fit(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
+def freed_fit(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
     """``(ctx, model, name, start)`` to the model fitted from ``start`` with the value ``name`` freed from its prior
     (``freed`` set to it), or None when the fit fails (:func:`located_drift`)."""
     ctx, final, name, x0 = args
@@ -342,7 +335,7 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
         return any(d["name"].lower() != t.freed.lower() for d in ctx.gross(t))
 
     best, trials = None, []
-    for trial in shared_map(_freed_fit, [(ctx, final, fit.free[cols[p]], x0) for p, x0 in starts]):
+    for trial in shared_map(freed_fit, [(ctx, final, fit.free[cols[p]], x0) for p, x0 in starts]):
         if trial is None:
             continue
         trials.append(trial)

@@ -45,7 +45,7 @@ from pris_cosim.circuits.circuit import GROUND
 
 from estimation.diagnosis.baseline import fit_multistart
 from estimation.diagnosis.context import NOISE_MARGIN
-from estimation.diagnosis.drift import DRIFT_MIN_DBIC, parallel_partners
+from estimation.diagnosis.drift import DRIFT_MIN_DBIC, freed_fit, parallel_partners
 from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, configuration_ports, current_nc
 from estimation.diagnosis.prior import DesignPrior
 
@@ -258,13 +258,6 @@ def value_without_group(ctx: Any, prior: DesignPrior, located: FitResult) -> Fit
     FitResult or None
         The refitted model (``freed`` set), or None when the fit fails.
     """
-    name = located.freed
-    loose = replace(prior, design={n: v for n, v in prior.design.items() if n != name.lower()})
-    try:
-        fit = ctx.fit(located.fitted_circuit(), located.effects, prior=loose, couplings=located.couplings)
-        trial = fit.fit_continued(np.concatenate([np.zeros(fit.nc), located.x[current_nc(located):]]),
-                                  max_nfev=100, tol=1e-7)
-    except CANDIDATE_FAILURES:
-        return None
-    trial.freed = name
-    return trial
+    nc = current_nc(located)
+    return freed_fit((replace(ctx, prior=prior), located, located.freed,
+                      np.concatenate([np.zeros(nc), located.x[nc:]])))
