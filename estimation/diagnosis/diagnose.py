@@ -89,7 +89,7 @@ from estimation.diagnosis.evidence import (band_table, localise, noise_floor, no
     unexplained_bands)
 from estimation.diagnosis.fit import (CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit,
     configuration_ports, current_nc, significant)
-from estimation.diagnosis.drift import located_drift, relaxed_drift, with_parallel
+from estimation.diagnosis.drift import DRIFT_MIN_DBIC, located_drift, relaxed_drift, with_parallel
 from estimation.diagnosis.converge import converged
 from estimation.diagnosis.holdout import held_out_gain
 from estimation.diagnosis.prior import DEFAULT_TOLERANCE, design_prior
@@ -265,9 +265,11 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if prior is not None and (not ctx.explained(baseline) or ctx.drift(baseline)):
         group_fits: list[FitResult] = []
         group = group_drift(ctx, baseline, lambda m: log(m, progress), group_fits)
-        # a group's fit, started from the design values scaled, that fits far better than the baseline found the
-        # baseline's own model a better optimum: the baseline refitted from its values, and the groups sought again
-        better = [g for g in group_fits if g.objective < 0.5 * baseline.objective]
+        # a group's fit, started from the design values scaled, whose BIC is lower than the baseline's by
+        # DRIFT_MIN_DBIC with its factor counted may have found a better optimum of the baseline's own model: the
+        # baseline refitted from its values (kept when it fits better), and the groups sought again
+        better = [g for g in group_fits
+                  if baseline.bic - (g.bic + np.log(g.n_residuals)) >= DRIFT_MIN_DBIC]
         if better:
             baseline = _polish_baseline(ctx, baseline, better, progress)
             group, group_on = group_drift(ctx, baseline, lambda m: log(m, progress)), baseline

@@ -104,20 +104,37 @@ def _fewest_needed(ctx: Any, current: FitResult, freed: list[str], kept: list[di
     ``DRIFT_MIN_DBIC``, the value whose freeing fits best is freed. What is
     freed then is the drift reported. Each fit starts from the model's values
     and from the design's (the basin of a spread-out optimum is not the
-    basin of the value off alone).
+    basin of the value off alone). Values in parallel (:func:`parallel_partners`)
+    are one unit, as in :func:`_held_check`: held with their combination at
+    the edge, each keeping its share, the hold counted as one parameter.
     """
-    names = [d["name"] for d in kept if not d.get("parallel") and d["name"] in current.values
-             and not parallel_partners(current.circuit, d["name"])]
-    if len(names) < 2:
+    units: list[list[str]] = []
+    for d in kept:
+        name = d["name"]
+        if name not in current.values or any(name in u for u in units):
+            continue
+        units.append([name] + [p for p in parallel_partners(current.circuit, name)
+                               if p.lower() in ctx.prior.design and p in current.values])
+    if len(units) < 2:
         return kept
     tail = current.x[current_nc(current):]
-    keys = {n.lower() for n in names} | set(freed)
+    keys = {n.lower() for u in units for n in u} | set(freed)
     loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in keys})
+    n_res = current.n_residuals
 
-    def fitted(free: list[str]) -> FitResult | None:  # the values not in ``free`` held at the nearest edge
-        held = [n for n in names if n not in free]
-        edge = {n: ctx.prior.design[n.lower()] * float(np.exp(np.clip(
-            np.log(current.values[n] / ctx.prior.design[n.lower()]), -ctx.prior.tau, ctx.prior.tau))) for n in held}
+    def combined(unit: list[str]) -> float:  # the unit's ratio to the design (capacitances add, else conductances)
+        comb = (lambda xs: sum(xs)) if current.circuit.element(unit[0]).kind == "C" else \
+            (lambda xs: 1 / sum(1 / x for x in xs))
+        return comb([current.values[g] for g in unit]) / comb([ctx.prior.design[g.lower()] for g in unit])
+
+    def fitted(free: list[int]) -> tuple[FitResult, float] | None:  # the units not in ``free`` held at the edge
+        held_units = [u for i, u in enumerate(units) if i not in free]
+        edge = {}
+        for u in held_units:
+            ratio = combined(u)
+            shift = float(np.exp(np.clip(np.log(ratio), -ctx.prior.tau, ctx.prior.tau))) / ratio
+            edge.update({g: current.values[g] * shift for g in u})
+        held = [g for u in held_units for g in u]
         try:
             fit = ctx.fit(current.fitted_circuit().with_values(edge), current.effects, fixed=held, prior=loose,
                           couplings=current.couplings)
@@ -126,22 +143,25 @@ def _fewest_needed(ctx: Any, current: FitResult, freed: list[str], kept: list[di
             other = fit.fit_continued(fit.design_vector(x0), max_nfev=60, tol=1e-7)
         except CANDIDATE_FAILURES:
             return None
-        return other if other.objective < best.objective else best
+        res = other if other.objective < best.objective else best
+        return res, res.bic + sum(len(u) - 1 for u in held_units) * np.log(n_res)  # one parameter per hold
 
-    every, now = fitted(list(names)), fitted([])
+    every, now = fitted(list(range(len(units)))), fitted([])
     if every is None or now is None:
         return kept
-    chosen: list[str] = []
-    while len(chosen) < len(names) and now.bic - every.bic >= DRIFT_MIN_DBIC:
-        trials = [(t, n) for t, n in ((fitted(chosen + [n]), n) for n in names if n not in chosen) if t is not None]
+    chosen: list[int] = []
+    while len(chosen) < len(units) and now[1] - every[1] >= DRIFT_MIN_DBIC:
+        trials = [(t, i) for t, i in ((fitted(chosen + [i]), i) for i in range(len(units)) if i not in chosen)
+                  if t is not None]
         if not trials:
             return kept
-        now, name = min(trials, key=lambda t: t[0].bic)
-        chosen.append(name)
-    dropped = [n for n in names if n not in chosen]
+        now, pick = min(trials, key=lambda t: t[0][1])
+        chosen.append(pick)
+    dropped = [n for i, u in enumerate(units) if i not in chosen for n in u]
     if dropped:
+        said = [", ".join(u) for i, u in enumerate(units) if i in chosen]
         log(f"{', '.join(dropped)}: held within the tolerance together"
-            + (f" with {', '.join(chosen)} free" if chosen else "")
+            + (f" with {'; '.join(said)} free" if said else "")
             + ", the data do not need them beyond it: not reported")
     return [d for d in kept if d["name"] not in dropped]
 

@@ -115,3 +115,17 @@ def test_a_value_off_is_reported_alone_not_with_the_one_that_made_up_for_it(tmp_
     d = _diagnose(case, tmp_path)
     assert not d.causes, (d.cause, d.candidates())
     assert reported_drift(d.drift, case.drift) == {"L6"}, d.drift
+
+
+@pytest.mark.slow
+def test_a_value_off_is_found_when_a_groups_fit_finds_the_better_optimum(tmp_path):
+    """Draw 1124 of the benchmark's fixed seeds (four sections, 915 points, 1.0 % noise): L3 at 1.53x its design.
+    The baseline's own fit stops at L3 x1.32 (1.06x the noise floor, so nothing seems wrong); the resistances'
+    group fit, started from the design values scaled, reaches a BIC 393 lower with a factor of 1.04 (within the
+    tolerance: the other values found the better optimum). The baseline refitted from it has L3 at about 1.4x,
+    which the data need beyond the tolerance: drift of L3, no cause."""
+    case = draw(1124)
+    assert case.effect == "beyond" and case.drift == ["L3"]
+    d = _diagnose(case, tmp_path)
+    assert not d.causes, (d.cause, d.candidates())
+    assert reported_drift(d.drift, case.drift) == {"L3"}, d.drift

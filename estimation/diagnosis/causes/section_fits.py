@@ -182,12 +182,13 @@ SPLIT_SEEDS = 3
 SPLIT_REFINED = 3
 
 
-def _split_seeded(args: tuple[Context, Any, Any, int, Sequence[Effect], np.ndarray]) -> tuple[Any, Any] | None:
-    """Section ``j`` of chain ``ch`` made two and fitted from its best seeds (:func:`split_every_section`):
-    ``(Unmerged, FitResult)``, None when the split cannot be built or fitted."""
-    ctx, circuit, ch, j, effects, tail = args
+def _split_seeded(args: tuple[Context, Any, Any, int, bool, Sequence[Effect], np.ndarray]) -> tuple[Any, Any] | None:
+    """Section ``j`` of chain ``ch`` made two (``respaced``: the winding one section longer) and fitted from its
+    best seeds (:func:`split_every_section`): ``(Unmerged, FitResult)``, None when the split cannot be built or
+    fitted."""
+    ctx, circuit, ch, j, respaced, effects, tail = args
     try:
-        um = Unmerged(circuit, ch, j)
+        um = Unmerged(circuit, ch, j, respaced)
         pair = {um.first["L"].lower(), um.second["L"].lower()}
         ks = [e.name for e in um.candidate.circuit.of_kind("K") if {n.lower() for n in e.nodes} & pair]
         fit = ctx.fit(um.candidate.circuit, effects, couplings=ks)
@@ -214,7 +215,8 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     For each section ``j`` of each winding the split of :class:`.unmerge.Unmerged` (two sections in series, the
     inductance and the series capacitance shared between them, the new node with its own capacitance to ground)
     is built from the *fitted* model's values, with the couplings of the two new inductors free (the coupling
-    partition of the split). Its ``SPLIT_SEEDS`` best seeds (by cost) are fitted through smoothed errors (every
+    partition of the split), twice: with the other couplings as the model has them, and respaced (every distance
+    counted along the winding made one section longer, :class:`.unmerge.Unmerged`). Its ``SPLIT_SEEDS`` best seeds (by cost) are fitted through smoothed errors (every
     section's, shared with the helper process). The ``SPLIT_REFINED`` best splits, ranked by objective with their
     halves merged back under the prior (:meth:`.context.Context.penalised`), are fitted again from
     ``SPLIT_STARTS`` random starts around them, as the baseline is (:func:`.baseline.fit_multistart`): the equal
@@ -229,7 +231,8 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     effects = list(base.effects)
     tail = base.x[current_nc(base):]
     t = time.perf_counter()
-    items = [(ctx, circuit, ch, j, effects, tail) for ch in find_chains(circuit, ports) for j in range(len(ch.sections))]
+    items = [(ctx, circuit, ch, j, respaced, effects, tail) for ch in find_chains(circuit, ports)
+             for j in range(len(ch.sections)) for respaced in (False, True)]
     seeded = [s for s in shared_map(_split_seeded, items) if s is not None]
     seeded.sort(key=lambda s: ctx.penalised(s[1]))
     log(f"  {len(seeded)} splits fitted from their seeds ({time.perf_counter() - t:.1f} s)"

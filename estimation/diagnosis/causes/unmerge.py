@@ -24,6 +24,16 @@ natural frequency more in the band), the search here starts elsewhere:
    resonances of their responses sit on the measured ones
    (:func:`resonance_score`), and by cost; the best few are fitted in full.
 
+   A winding with a section the design lacks is also one section longer:
+   sections on either side of the missing one are one section farther
+   apart than the design counts them. The *respaced* split
+   (``Unmerged(..., respaced=True)``) counts every distance along the
+   lengthened winding: a coupling across the split (the first half's to the
+   sections after it included) becomes ``k * p(d + 1) / p(d)``, with ``p``
+   the winding's coupling profile over the design's distances, and the new
+   section's couplings are ``p`` at its own distances. Its seeds keep the
+   split section's own inductance (the halves and their mutual), not the
+   winding's total, which the wider spacing lowers.
 4. *Couplings.* The seeds are fitted with the couplings as designed; the
    best is then refitted with the couplings of the two sections free
    (:mod:`.sections`), while its fit with the designed couplings is the one
@@ -197,6 +207,9 @@ def _keep_total(M: np.ndarray, pair: np.ndarray, target: float) -> float:
 class Unmerged:
     """Section ``j`` of ``chain`` in ``circuit`` made two whole sections.
 
+    With ``respaced`` every coupling is counted along the winding made one
+    section longer (the module's docstring, step 2).
+
     Attributes
     ----------
     candidate : SectionCandidate
@@ -210,10 +223,12 @@ class Unmerged:
         The chain's total inductance before the split (kept by the seeds).
     """
 
-    def __init__(self, circuit: Circuit, chain: Chain, j: int):
+    def __init__(self, circuit: Circuit, chain: Chain, j: int, respaced: bool = False):
         values = circuit.resolve(check=False)
         k = coupling_profile(circuit, chain, values, j)
-        k_in = float(min(k(1), 0.999))
+        # respaced: the profile over the design's own distances, and every distance counted with the split in
+        p = coupling_profile(circuit, chain, values, len(chain.sections)) if respaced else k
+        k_in = float(min(p(1), 0.999))
         sec = chain.sections[j]
         base = split_section(circuit, chain, j, coupling_decay(circuit, [chain], values), 1.0)
         c = base.circuit
@@ -234,12 +249,16 @@ class Unmerged:
                 new_k.append(e.name)
             elif new_l in pair:
                 other = next(n for n in pair if n != new_l)
-                over[e.name] = k(abs(pos[other] - pos[new_l])) if other in pos else \
+                over[e.name] = p(abs(pos[other] - pos[new_l])) if other in pos else \
                     ks.get(frozenset((old_l, other)), float(e.value))
                 new_k.append(e.name)
             elif old_l in pair:
                 other = next(n for n in pair if n != old_l)
                 over[e.name] = ks.get(frozenset((old_l, other)), float(e.value))
+            if respaced and pair[0] in pos and pair[1] in pos and new_l not in pair:
+                a, b = sorted(pos[n] - (pos[n] > j) for n in pair)  # the design's positions
+                if a <= j < b and p(b - a) > 0:
+                    over[e.name] = float(ks.get(frozenset(pair), float(e.value))) * min(1.0, p(b - a + 1) / p(b - a))
         L = float(values[old_l])
         half = L / (2 * (1 + k_in))
         over[sec.inductor] = half
@@ -253,8 +272,9 @@ class Unmerged:
             first_c = c.add(_unique(c, "Cs_split"), sec.start, mid, float(np.mean(series))).name
             new.append(first_c)
         c = _make_pd(c, new_k)
-        self.candidate = SectionCandidate(c, f"section {j + 1} of the winding at {chain.port} is two sections",
-                                          new, chain.port, touched_couplings(c, [sec.inductor, new_l]))
+        how = f"section {j + 1} of the winding at {chain.port} is two sections" + (
+            ", the winding one section longer" if respaced else "")
+        self.candidate = SectionCandidate(c, how, new, chain.port, touched_couplings(c, [sec.inductor, new_l]))
         self.k_name = next((e.name for e in c.of_kind("K") if {n.lower() for n in e.nodes} == {old_l, new_l}), None)
         self.first = {"L": sec.inductor, "R": sec.resistor, "C": first_c}
         self.second = {"L": next(n for n in new if n[0].upper() == "L"),
@@ -266,7 +286,10 @@ class Unmerged:
         self._start = sec.start
         self.own_c = sec.series_caps[0] if sec.series_caps else None
         self.inductors = list(chain.inductors) + [self.second["L"]]
-        self.total_h = float(inductance_matrix(circuit, chain.inductors).sum())
+        self.respaced = respaced
+        # the seeds keep the winding's total inductance; respaced, the split section's own (the total as built)
+        self.total_h = float(inductance_matrix(c if respaced else circuit,
+                                               self.inductors if respaced else chain.inductors).sum())
 
     def merged_back(self, fitted: Circuit) -> dict[str, float]:
         """Values of the split section's own elements with the two fitted sections merged into one again.
