@@ -307,7 +307,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if answered:
         results, passes = {}, 0
     # ---- one-port data that no single cause explains, above the noise or fitted only by distorted values: every
-    # section split, from the fitted values and (distorted values) from the design's
+    # section split, from the fitted values and, when those splits do not explain the data, from the design's (a
+    # fitted baseline stuck above the noise keeps its poor optimum in every split started from it)
     if (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes
             and (ctx.unfit(baseline) or ctx.distorted(baseline))
             and not any(ctx.explained(r) for r in results.values())):
@@ -315,7 +316,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         # every section of the fitted model split, from several starts each (:func:`.section_fits.split_every_section`)
         log("missing-section: every section of the fitted model made two", progress)
         wide = split_every_section(ctx, baseline, configuration_ports(configs))
-        if (wide is None or not ctx.explained(wide)) and ctx.distorted(baseline):  # and the design's sections split
+        if wide is None or not ctx.explained(wide):  # and the design's sections split
             log("missing-section: every section of the design made two", progress)
             other = split_every_section(ctx, baseline, configuration_ports(configs), from_design=True)
             if other is not None and (wide is None or ctx.penalised(other) < ctx.penalised(wide)):

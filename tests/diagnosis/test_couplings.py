@@ -41,3 +41,32 @@ def test_split_section_names_the_couplings_it_touches():
     for name in cand.couplings:
         assert {"lb2", new_l.lower()} & {n.lower() for n in cand.circuit.element(name).nodes}
 
+
+
+def test_a_respaced_split_counts_every_coupling_along_the_lengthened_winding():
+    """A winding whose couplings decay as ``rho^d`` (a Kac-Murdock-Szego matrix), section 2 of 4 made two,
+    respaced: the five sections' couplings are ``rho^d`` over the five positions (written out here), and the
+    split section's own inductance (the halves with their mutual) is kept."""
+    from estimation.diagnosis.causes.unmerge import Unmerged
+    from pris_cosim.circuits.netlist import parse_netlist
+
+    rho, n = 0.6, 4
+    lines = ["* four sections"]
+    node = lambda i: "0" if i >= n else f"n{i + 1}"  # noqa: E731
+    for i in range(n):
+        lines += [f"R{i + 1} {node(i)} x{i + 1} 0.5", f"L{i + 1} x{i + 1} {node(i + 1)} {2 + i}m",
+                  f"C{i + 1} {node(i)} {node(i + 1)} 1n", f"Cg{i + 1} {node(i)} 0 0.5n"]
+    lines += [f"K{i + 1}{j + 1} L{i + 1} L{j + 1} {rho ** (j - i)}" for i in range(n) for j in range(i + 1, n)]
+    circuit = parse_netlist("\n".join(lines) + "\n")
+    chain = find_chains(circuit, ["n1"])[0]
+    um = Unmerged(circuit, chain, 1, respaced=True)
+    c = um.candidate.circuit
+    values = c.resolve(check=False)
+    position = {"l1": 0, "l2": 1, um.second["L"].lower(): 2, "l3": 3, "l4": 4}
+    for k in c.of_kind("K"):
+        a, b = (x.lower() for x in k.nodes)
+        assert np.isclose(float(values[k.key]), rho ** abs(position[a] - position[b]), rtol=1e-9), k.name
+    l1, l2 = float(values["l2"]), float(values[um.second["L"].lower()])
+    assert np.isclose(l1 + l2 + 2 * rho * np.sqrt(l1 * l2), 3e-3)
+    plain = Unmerged(circuit, chain, 1).candidate.circuit.resolve(check=False)
+    assert np.isclose(float(plain["k14"]), rho ** 3)  # not respaced: the design's couplings kept
