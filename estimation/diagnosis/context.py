@@ -107,6 +107,11 @@ class Context:
         return r.objective + sum((s * math.log(v / self.prior.design[n.lower()])) ** 2
                                  for n, v in self.merged(r).items())
 
+    def penalised_bic(self, r: FitResult) -> float:
+        """``r``'s BIC on :meth:`penalised` (its parameters counted): how two fits of a missing section, from
+        different values or with different couplings free, are weighed against each other."""
+        return r.bic + r.n_residuals * math.log(self.penalised(r) / r.objective) if r.objective > 0 else r.bic
+
     def gross(self, r: FitResult) -> list[dict[str, Any]]:
         """The values of ``r`` more than ``GROSS_DRIFT`` tolerances from the design."""
         return [d for d in self.drift(r) if d["sigmas"] > GROSS_DRIFT]

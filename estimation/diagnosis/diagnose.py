@@ -319,10 +319,10 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         if wide is None or not ctx.explained(wide):  # and the design's sections split
             log("missing-section: every section of the design made two", progress)
             other = split_every_section(ctx, baseline, configuration_ports(configs), from_design=True)
-            if other is not None and (wide is None or ctx.penalised(other) < ctx.penalised(wide)):
+            if other is not None and (wide is None or ctx.penalised_bic(other) < ctx.penalised_bic(wide)):
                 wide = other
-        if wide is not None and wide.objective < baseline.objective and ctx.penalised(wide) < (
-                ctx.penalised(results["missing-section"]) if "missing-section" in results else np.inf):
+        if wide is not None and wide.objective < baseline.objective and ctx.penalised_bic(wide) < (
+                ctx.penalised_bic(results["missing-section"]) if "missing-section" in results else np.inf):
             results["missing-section"] = wide
             failed = [x for x in failed if x["cause"] != "missing-section"]
             log(f"missing-section (every split): {wide.structure}: cost {wide.cost:.4g}, gain "

@@ -190,7 +190,10 @@ def _split_seeded(args: tuple[Context, Any, Any, int, bool, Sequence[Effect], np
     try:
         um = Unmerged(circuit, ch, j, respaced)
         pair = {um.first["L"].lower(), um.second["L"].lower()}
-        ks = [e.name for e in um.candidate.circuit.of_kind("K") if {n.lower() for n in e.nodes} & pair]
+        # respaced, the couplings are the winding's profile over the lengthened winding (no new parameters); else
+        # the couplings of the two halves are free (how the section's coupling is shared is not known)
+        ks = [] if respaced else [e.name for e in um.candidate.circuit.of_kind("K")
+                                  if {n.lower() for n in e.nodes} & pair]
         fit = ctx.fit(um.candidate.circuit, effects, couplings=ks)
         rows = um.seeds(fit.free, tail)
         r = fit.residuals_batch(rows)
@@ -215,8 +218,8 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     For each section ``j`` of each winding the split of :class:`.unmerge.Unmerged` (two sections in series, the
     inductance and the series capacitance shared between them, the new node with its own capacitance to ground)
     is built from the *fitted* model's values, with the couplings of the two new inductors free (the coupling
-    partition of the split), twice: with the other couplings as the model has them, and respaced (every distance
-    counted along the winding made one section longer, :class:`.unmerge.Unmerged`). Its ``SPLIT_SEEDS`` best seeds (by cost) are fitted through smoothed errors (every
+    partition of the split), and again respaced (every distance counted along the winding made one section longer,
+    :class:`.unmerge.Unmerged`), its couplings then held at the winding's profile. Its ``SPLIT_SEEDS`` best seeds (by cost) are fitted through smoothed errors (every
     section's, shared with the helper process). The ``SPLIT_REFINED`` best splits, ranked by objective with their
     halves merged back under the prior (:meth:`.context.Context.penalised`), are fitted again from
     ``SPLIT_STARTS`` random starts around them, as the baseline is (:func:`.baseline.fit_multistart`): the equal
