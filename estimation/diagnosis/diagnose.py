@@ -89,7 +89,7 @@ from estimation.diagnosis.evidence import (band_table, localise, noise_floor, no
     unexplained_bands)
 from estimation.diagnosis.fit import (CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit,
     configuration_ports, current_nc, significant)
-from estimation.diagnosis.drift import DRIFT_MIN_DBIC, located_drift, relaxed_drift, with_parallel
+from estimation.diagnosis.drift import DRIFT_MIN_DBIC, freed_fit, located_drift, relaxed_drift, with_parallel
 from estimation.diagnosis.converge import converged
 from estimation.diagnosis.holdout import held_out_gain
 from estimation.diagnosis.prior import DEFAULT_TOLERANCE, design_prior
@@ -398,12 +398,27 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                         alone.structure = located.structure
                         baseline, group_entry = alone, None
                         ctx.prior = prior = prior_before
+    on_top = relaxed_drift(ctx, extended or baseline, lambda m: log(m, progress)) if prior is not None else []
+    if group_entry is not None and extended is None and len(on_top) == 1 and on_top[0]["name"] in baseline.values:
+        # one value beyond the group's tolerance on top of it: the same backward step as for a value the one-value
+        # search found (the value freed in the group's model, then without the group)
+        nc = current_nc(baseline)
+        located = freed_fit((ctx, baseline, on_top[0]["name"], np.concatenate([np.zeros(nc), baseline.x[nc:]])))
+        alone = value_without_group(ctx, prior_before, located) if located is not None else None
+        g_bic = located.bic + np.log(located.n_residuals) if located is not None else -np.inf
+        if alone is not None and alone.bic <= g_bic:
+            log(f"{located.freed} alone off the design: BIC {g_bic - alone.bic:.1f} below {group_entry['name']} "
+                f"x{group_entry['ratio']:.3g} with it: not the group", progress)
+            alone.structure = baseline.structure
+            baseline, group_entry = alone, None
+            ctx.prior = prior = prior_before
+            on_top = relaxed_drift(ctx, baseline, lambda m: log(m, progress))
     cands = sorted(results.values(), key=lambda r: r.bic)
     diag = Diagnosis(chosen[0] if chosen else "none", baseline, extended, cands, f, data, causes=chosen, steps=steps,
                      noise=floor, failed=failed)
     final = extended or baseline
     diag.tolerance = float(tolerance) if prior is not None else float("inf")
-    diag.drift = ([group_entry] if group_entry else []) + relaxed_drift(ctx, final, lambda m: log(m, progress))
+    diag.drift = ([group_entry] if group_entry else []) + on_top
     diag.baseline_drift = with_parallel(baseline.circuit, baseline.values, prior.design, ctx.drift(baseline)) \
         if prior is not None else []
     diag.drift_alternatives = list(getattr(final, "drift_alternatives", []))
