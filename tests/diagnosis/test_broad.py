@@ -132,6 +132,7 @@ def test_a_value_off_is_found_when_a_groups_fit_finds_the_better_optimum(tmp_pat
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_value_on_top_of_a_group_is_weighed_without_the_group(tmp_path):
     """Draw 1177 of the benchmark's fixed seeds (four sections, 912 points, 0.39 % noise): Cg2 alone at 1.93x its
     design. The group of capacitances to ground (x1.31) has a lower BIC than Cg2 alone from the one-value search,
