@@ -20,9 +20,10 @@ Steps:
    missing section is also sought from the nominal circuit as two whole
    sections seeded at the measured resonances (:mod:`.unmerge`); its two
    sections merged back refit the baseline. For one-port data that no
-   single cause explains, every section of the fitted model (and, when the
-   baseline needed values far off the design, of the design) is made two
-   whole sections and fitted from several starts
+   single cause explains, every section of the fitted model (and, when
+   those splits do not explain the data either, of the design) is made two
+   whole sections, as designed and respaced along the winding made one
+   section longer (:class:`.unmerge.Unmerged`), and fitted from several starts
    (:func:`.section_fits.split_every_section`), alone and beside the effect
    that does best alone. A baseline that does not explain the data
    (:meth:`.context.Context.unfit`) is also tried against the drift of a
