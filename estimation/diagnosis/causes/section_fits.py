@@ -219,8 +219,8 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     inductance and the series capacitance shared between them, the new node with its own capacitance to ground)
     is built from the *fitted* model's values, with the couplings of the two new inductors free (the coupling
     partition of the split), and again respaced (every distance counted along the winding made one section longer,
-    :class:`.unmerge.Unmerged`), its couplings then held at the winding's profile. Its ``SPLIT_SEEDS`` best seeds (by cost) are fitted through smoothed errors (every
-    section's, shared with the helper process). The ``SPLIT_REFINED`` best splits, ranked by objective with their
+    :class:`.unmerge.Unmerged`), its couplings then held at the winding's profile. Its ``SPLIT_SEEDS`` best seeds
+    (by cost) are fitted through smoothed errors (every section's, shared with the helper process). The ``SPLIT_REFINED`` best splits, ranked by objective with their
     halves merged back under the prior (:meth:`.context.Context.penalised`), are fitted again from
     ``SPLIT_STARTS`` random starts around them, as the baseline is (:func:`.baseline.fit_multistart`): the equal
     halves of a split are a saddle of the split model, and the seeds' partitions are a few points of a space the
