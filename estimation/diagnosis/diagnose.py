@@ -390,27 +390,23 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                 extended = located
             else:
                 baseline = located
-                if group_entry is not None:  # the group with the value on top of it, against the value alone
-                    alone = value_without_group(ctx, prior_before, located)
-                    g_bic = located.bic + np.log(located.n_residuals)  # the group's factor one parameter more
-                    if alone is not None and alone.bic <= g_bic:
-                        log(f"{located.freed} alone off the design: BIC {g_bic - alone.bic:.1f} below "
-                            f"{group_entry['name']} x{group_entry['ratio']:.3g} with it: not the group", progress)
-                        alone.structure = located.structure
-                        baseline, group_entry = alone, None
-                        ctx.prior = prior = prior_before
+                # the group with the value on top of it, against the value alone
+                alone = value_without_group(ctx, prior_before, located, group_entry, lambda m: log(m, progress)) \
+                    if group_entry is not None else None
+                if alone is not None:
+                    baseline, group_entry = alone, None
+                    ctx.prior = prior = prior_before
     on_top = relaxed_drift(ctx, extended or baseline, lambda m: log(m, progress)) if prior is not None else []
     if group_entry is not None and extended is None and len(on_top) == 1 and on_top[0]["name"] in baseline.values:
         # one value beyond the group's tolerance on top of it: the same backward step as for a value the one-value
         # search found (the value freed in the group's model, then without the group)
         nc = current_nc(baseline)
         located = freed_fit((ctx, baseline, on_top[0]["name"], np.concatenate([np.zeros(nc), baseline.x[nc:]])))
-        alone = value_without_group(ctx, prior_before, located) if located is not None else None
-        g_bic = located.bic + np.log(located.n_residuals) if located is not None else -np.inf
-        if alone is not None and alone.bic <= g_bic:
-            log(f"{located.freed} alone off the design: BIC {g_bic - alone.bic:.1f} below {group_entry['name']} "
-                f"x{group_entry['ratio']:.3g} with it: not the group", progress)
-            alone.structure = baseline.structure
+        if located is not None:
+            located.structure = baseline.structure
+        alone = value_without_group(ctx, prior_before, located, group_entry, lambda m: log(m, progress)) \
+            if located is not None else None
+        if alone is not None:
             baseline, group_entry = alone, None
             ctx.prior = prior = prior_before
             on_top = relaxed_drift(ctx, baseline, lambda m: log(m, progress))

@@ -242,22 +242,30 @@ def group_drift(ctx: Any, r: FitResult, log: Callable[[str], None], tried: list[
     return best
 
 
-def value_without_group(ctx: Any, prior: DesignPrior, located: FitResult) -> FitResult | None:
+def value_without_group(ctx: Any, prior: DesignPrior, located: FitResult, entry: dict,
+                        log: Callable[[str], None]) -> FitResult | None:
     """The backward step of a group once one value is found off the design on top of it.
 
-    ``located`` (:func:`.drift.located_drift` on the group's model: the
-    value ``located.freed`` freed, the others' prior centred on the group's
-    factor) is refitted from its own values under ``prior`` (the design's,
-    the group dropped), the same value freed. A group of six capacitances to
-    ground at x1.32 with one of them at x2.1 on top is one capacitance off
-    the design when this fit's BIC is no higher than the group's with its
-    factor counted (:func:`.diagnose._diagnose` compares them).
+    ``located`` (the group's model, the value ``located.freed`` freed, the
+    others' prior centred on the group's factor ``entry``) is refitted from
+    its own values under ``prior`` (the design's, the group dropped), the
+    same value freed. A group of six capacitances to ground at x1.32 with one
+    of them at x2.1 on top is one capacitance off the design when this fit's
+    BIC is no higher than the group's with its factor counted (one parameter
+    more, ``ln N``).
 
     Returns
     -------
     FitResult or None
-        The refitted model (``freed`` set), or None when the fit fails.
+        The refitted model (``freed`` set, ``structure`` kept) when the value alone is the answer, else None.
     """
     nc = current_nc(located)
-    return freed_fit((replace(ctx, prior=prior), located, located.freed,
-                      np.concatenate([np.zeros(nc), located.x[nc:]])))
+    alone = freed_fit((replace(ctx, prior=prior), located, located.freed,
+                       np.concatenate([np.zeros(nc), located.x[nc:]])))
+    g_bic = located.bic + np.log(located.n_residuals)
+    if alone is None or alone.bic > g_bic:
+        return None
+    log(f"{located.freed} alone off the design: BIC {g_bic - alone.bic:.1f} below {entry['name']} "
+        f"x{entry['ratio']:.3g} with it: not the group")
+    alone.structure = located.structure
+    return alone

@@ -28,6 +28,15 @@ def _diagnose(case, folder: Path):
                               progress=False, tolerance=0.2)
 
 
+def _value_off_alone(seed: int, effect: str, name: str, folder: Path) -> None:
+    """Draw ``seed`` of the benchmark's fixed seeds has ``name`` alone off the design: no cause, that drift only."""
+    case = draw(seed)
+    assert case.effect == effect and case.drift == [name]
+    d = _diagnose(case, folder)
+    assert not d.causes, (d.cause, d.candidates())
+    assert reported_drift(d.drift, case.drift) == {name}, d.drift
+
+
 def _first_with_sections(effect: str, sections: int) -> int:
     return next(s for s in range(1, 10_000) if draw(s, effect).netlist.count("\nL") == sections)
 
@@ -98,11 +107,7 @@ def test_one_capacitance_to_ground_off_is_not_the_group(tmp_path):
     """Draw 1109 of the benchmark's fixed seeds (six sections, 851 points, 0.47 % noise): Cg2 alone is off the
     design. The group of the six capacitances to ground (x1.32) fits first, and Cg2 is then found on top of it;
     without the group Cg2 alone explains the data with a lower BIC: drift of Cg2, not of the group, no cause."""
-    case = draw(1109)
-    assert case.effect == "local" and case.drift == ["Cg2"]
-    d = _diagnose(case, tmp_path)
-    assert not d.causes, (d.cause, d.candidates())
-    assert reported_drift(d.drift, case.drift) == {"Cg2"}, d.drift
+    _value_off_alone(1109, "local", "Cg2", tmp_path)
 
 
 @pytest.mark.slow
@@ -110,11 +115,7 @@ def test_a_value_off_is_reported_alone_not_with_the_one_that_made_up_for_it(tmp_
     """Draw 1150 of the benchmark's fixed seeds (six sections, 207 points, 0.76 % noise): L6 alone at 0.46x its
     design. The fit spreads it (L6 0.57x, L4 0.71x), and each passes its own test at the edge with the other's prior
     in the way; weighed together, the data need L6 alone beyond the tolerance."""
-    case = draw(1150)
-    assert case.effect == "beyond" and case.drift == ["L6"]
-    d = _diagnose(case, tmp_path)
-    assert not d.causes, (d.cause, d.candidates())
-    assert reported_drift(d.drift, case.drift) == {"L6"}, d.drift
+    _value_off_alone(1150, "beyond", "L6", tmp_path)
 
 
 @pytest.mark.slow
@@ -124,11 +125,7 @@ def test_a_value_off_is_found_when_a_groups_fit_finds_the_better_optimum(tmp_pat
     group fit, started from the design values scaled, reaches a BIC 393 lower with a factor of 1.04 (within the
     tolerance: the other values found the better optimum). The baseline refitted from it has L3 at about 1.4x,
     which the data need beyond the tolerance: drift of L3, no cause."""
-    case = draw(1124)
-    assert case.effect == "beyond" and case.drift == ["L3"]
-    d = _diagnose(case, tmp_path)
-    assert not d.causes, (d.cause, d.candidates())
-    assert reported_drift(d.drift, case.drift) == {"L3"}, d.drift
+    _value_off_alone(1124, "beyond", "L3", tmp_path)
 
 
 @pytest.mark.slow
@@ -138,8 +135,4 @@ def test_a_value_on_top_of_a_group_is_weighed_without_the_group(tmp_path):
     design. The group of capacitances to ground (x1.31) has a lower BIC than Cg2 alone from the one-value search,
     and Cg2 is then beyond the group's tolerance on top of it; refitted from there without the group, Cg2 alone
     is lower in BIC than the group with it: drift of Cg2, not of the group, no cause."""
-    case = draw(1177)
-    assert case.effect == "local" and case.drift == ["Cg2"]
-    d = _diagnose(case, tmp_path)
-    assert not d.causes, (d.cause, d.candidates())
-    assert reported_drift(d.drift, case.drift) == {"Cg2"}, d.drift
+    _value_off_alone(1177, "local", "Cg2", tmp_path)
