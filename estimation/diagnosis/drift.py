@@ -10,7 +10,7 @@ the tolerance.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -122,10 +122,10 @@ def _fewest_needed(ctx: Any, current: FitResult, freed: list[str], kept: list[di
     loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in keys})
     n_res = current.n_residuals
 
-    def combined(unit: list[str]) -> float:  # the unit's ratio to the design (capacitances add, else conductances)
-        comb = (lambda xs: sum(xs)) if current.circuit.element(unit[0]).kind == "C" else \
-            (lambda xs: 1 / sum(1 / x for x in xs))
-        return comb([current.values[g] for g in unit]) / comb([ctx.prior.design[g.lower()] for g in unit])
+    def combined(unit: list[str]) -> float:  # the unit's ratio to the design
+        kind = current.circuit.element(unit[0]).kind
+        return parallel_value(kind, [current.values[g] for g in unit]) / \
+            parallel_value(kind, [ctx.prior.design[g.lower()] for g in unit])
 
     def fitted(free: list[int]) -> tuple[FitResult, float] | None:  # the units not in ``free`` held at the edge
         held_units = [u for i, u in enumerate(units) if i not in free]
@@ -180,6 +180,12 @@ def parallel_partners(circuit: Circuit, name: str) -> list[str]:
             and {node_name(n) for n in e.nodes} == ends]
 
 
+def parallel_value(kind: str, values: Sequence[float]) -> float:
+    """The value of elements of one ``kind`` in parallel (SI): capacitances add, resistances and uncoupled
+    inductances combine as conductances."""
+    return float(sum(values)) if kind == "C" else 1.0 / sum(1.0 / x for x in values)
+
+
 def with_parallel(circuit: Circuit, values: Mapping[str, float], design: Mapping[str, float],
                   drift: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """``drift`` with, for each value that has others of its kind across the same two nodes, ``parallel`` (their
@@ -197,9 +203,8 @@ def with_parallel(circuit: Circuit, values: Mapping[str, float], design: Mapping
         if group:
             el = circuit.element(d["name"])
             if all(e.key in fitted and design.get(e.key) for e in group):
-                combine = (lambda xs: float(sum(xs))) if el.kind == "C" else (lambda xs: 1 / sum(1 / x for x in xs))
-                both = {"design": combine([d["design"]] + [design[e.key] for e in group]),
-                        "fitted": combine([d["fitted"]] + [fitted[e.key] for e in group])}
+                both = {"design": parallel_value(el.kind, [d["design"]] + [design[e.key] for e in group]),
+                        "fitted": parallel_value(el.kind, [d["fitted"]] + [fitted[e.key] for e in group])}
                 both["ratio"] = both["fitted"] / both["design"]
                 d["parallel"] = [e.name for e in group]
                 d["combined"] = both
@@ -230,8 +235,8 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple
 
     def combined(values: dict[str, float]) -> float:  # the combination's ratio to the design's
         kind = circuit.element(name).kind
-        comb = (lambda xs: sum(xs)) if kind == "C" else (lambda xs: 1 / sum(1 / x for x in xs))
-        return comb([values[g] for g in group]) / comb([ctx.prior.design[g.lower()] for g in group])
+        return parallel_value(kind, [values[g] for g in group]) / \
+            parallel_value(kind, [ctx.prior.design[g.lower()] for g in group])
 
     try:
         free_fit = current
