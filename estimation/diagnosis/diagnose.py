@@ -72,7 +72,7 @@ Steps:
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -98,7 +98,8 @@ from estimation.diagnosis.causes.forms import rechoose_forms
 from estimation.diagnosis.causes.realise import realise_extended
 from estimation.diagnosis.report import parallel_note
 from estimation.diagnosis.result import Diagnosis
-from estimation.diagnosis.causes.section_fits import fit_missing_section, section_pairs, split_every_section
+from estimation.diagnosis.causes.section_fits import (every_section_split, fit_missing_section, section_pairs,
+    split_every_section)
 from estimation.diagnosis.causes.single import single_causes, start_tails
 from estimation.diagnosis.causes.unmerge import missing_modes, resolved_points
 from estimation.diagnosis.verdict import explains, misfit_sentence
@@ -300,35 +301,36 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if (prior is not None and baseline.objective < 0.5 * group_on.objective
             and (not ctx.explained(baseline) or ctx.drift(baseline))):
         group = group_drift(ctx, baseline, lambda m: log(m, progress))  # sought again on the baseline refitted
-    # ---- the group's drift, then one value off the design, weighed against every single cause
-    prior_before = ctx.prior
-    baseline, group_entry, answered, located_on = _drift_answer(ctx, baseline, group, results, failed, None,
-                                                                 bool(passes))
-    prior = ctx.prior
-    if answered:
-        results, passes = {}, 0
     # ---- one-port data that no single cause explains, above the noise or fitted only by distorted values: every
     # section split, from the fitted values and, when those splits do not explain the data, from the design's (a
-    # fitted baseline stuck above the noise keeps its poor optimum in every split started from it)
-    if (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes
-            and (ctx.unfit(baseline) or ctx.distorted(baseline))
-            and not any(ctx.explained(r) for r in results.values())):
+    # fitted baseline stuck above the noise keeps its poor optimum in every split started from it); run once, before
+    # a drift is taken as the answer when that answer is open (:func:`_drift_answer`), else after it
+    splits_on: list[FitResult] = []
+
+    def every_split() -> None:
+        if (splits_on or not (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes)
+                or not (ctx.unfit(baseline) or ctx.distorted(baseline))
+                or any(ctx.explained(r) for r in results.values())):
+            return
+        splits_on.append(baseline)
         t = time.perf_counter()
-        # every section of the fitted model split, from several starts each (:func:`.section_fits.split_every_section`)
-        log("missing-section: every section of the fitted model made two", progress)
-        wide = split_every_section(ctx, baseline, configuration_ports(configs))
-        if wide is None or not ctx.explained(wide):  # and the design's sections split
-            log("missing-section: every section of the design made two", progress)
-            other = split_every_section(ctx, baseline, configuration_ports(configs), from_design=True)
-            if other is not None and (wide is None or ctx.penalised_bic(other) < ctx.penalised_bic(wide)):
-                wide = other
+        wide = every_section_split(ctx, baseline, configuration_ports(configs))
         if wide is not None and wide.objective < baseline.objective and ctx.penalised_bic(wide) < (
                 ctx.penalised_bic(results["missing-section"]) if "missing-section" in results else np.inf):
             results["missing-section"] = wide
-            failed = [x for x in failed if x["cause"] != "missing-section"]
+            failed[:] = [x for x in failed if x["cause"] != "missing-section"]
             log(f"missing-section (every split): {wide.structure}: cost {wide.cost:.4g}, gain "
                  f"{1 - wide.cost / baseline.cost:.3f}, dBIC {baseline.bic - wide.bic:.1f} "
                  f"({time.perf_counter() - t:.1f} s)", progress)
+
+    # ---- the group's drift, then one value off the design, weighed against every single cause
+    prior_before = ctx.prior
+    baseline, group_entry, answered, located_on = _drift_answer(ctx, baseline, group, results, failed, None,
+                                                                 bool(passes), every_split)
+    prior = ctx.prior
+    if answered:
+        results, passes = {}, 0
+    every_split()
     for cause in list(results):
         if results[cause].objective >= baseline.objective:
             failed.append({"cause": cause, "cost": results.pop(cause).cost,
@@ -658,7 +660,8 @@ def _polish_baseline(ctx: Context, baseline: FitResult, fits, progress: bool) ->
 
 
 def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, results: dict[str, FitResult],
-                  failed: list[dict[str, Any]], located_on: FitResult | None, search: bool
+                  failed: list[dict[str, Any]], located_on: FitResult | None, search: bool,
+                  structures: Callable[[], None] = lambda: None
                   ) -> tuple[FitResult, dict[str, Any] | None, bool, FitResult | None]:
     """A group's drift, then one value off the design, weighed against every cause in ``results`` by BIC.
 
@@ -669,6 +672,10 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     explaining the data, one value of the design really off (a capacitance doubled, :func:`.drift.located_drift`)
     is weighed the same way, the freed value one parameter; below them all it is the answer (drift, no cause), and
     no structure is sought for what it explains. ``failed`` gets the causes so set aside.
+
+    A drift is taken as the answer on the best fit of every rival: when it is open (its model does not explain
+    the data, or a new section's fit comes within ``DRIFT_MIN_DBIC`` of it), ``structures`` (the search of every
+    section split, which adds its best to ``results``) runs first and the drift is weighed again.
 
     Returns
     -------
@@ -689,6 +696,8 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
             group = None
     if group is not None:
         g_bic = group[0].bic + np.log(group[0].n_residuals)
+        if _open(ctx, group[0], g_bic, results):
+            structures()
         rival = min(results.values(), key=lambda r: r.bic) if results else None
         if rival is None or g_bic < rival.bic:
             log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: BIC below every single cause's"
@@ -707,6 +716,8 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     if one is None:
         return baseline, None, False, baseline
     o_bic = one.bic + np.log(one.n_residuals)
+    if _open(ctx, one, o_bic, results):
+        structures()
     rival = min(results.values(), key=lambda r: r.bic)
     if o_bic < rival.bic:
         log(f"{one.freed} off the design: BIC below every single cause's ({rival.cause}: "
@@ -717,6 +728,14 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.bic:.1f}: not reported",
         progress)
     return baseline, None, False, baseline
+
+
+def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResult]) -> bool:
+    """A drift answer (its fit and BIC with the drift's parameters counted) that the structures must be weighed
+    against at their best: its model does not explain the data, or a new section's fit (a local optimum of a
+    search that is not complete) comes within ``DRIFT_MIN_DBIC`` ("very strong") of it."""
+    section = results.get("missing-section")
+    return not ctx.explained(drift) or (section is not None and section.bic - bic < DRIFT_MIN_DBIC)
 
 
 def _baseline_refitted(args: tuple[Context, Circuit, int]) -> FitResult | None:

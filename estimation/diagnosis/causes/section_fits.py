@@ -12,9 +12,11 @@ from typing import Any
 
 import numpy as np
 
+from estimation.diagnosis.align import aligned_start
 from estimation.diagnosis.causes.catalogue import Effect
 from estimation.diagnosis.context import NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR, WIDE_SEED_NFEV, Context, log
 from estimation.diagnosis.cores import shared_map
+from estimation.diagnosis.realign import realigned
 from estimation.diagnosis.fit import (CANDIDATE_FAILURES, WIDE_CONTINUATION, WIDER_CONTINUATION, FitResult,
     FrequencyFit, configuration_ports, current_nc)
 from estimation.diagnosis.causes.sections import section_candidates
@@ -198,7 +200,15 @@ def _split_seeded(args: tuple[Context, Any, Any, int, bool, Sequence[Effect], np
         rows = um.seeds(fit.free, tail)
         r = fit.residuals_batch(rows)
         order = np.argsort(np.sum(r * r, axis=1))[:SPLIT_SEEDS]
-        seeded = min((fit.fit_continued(rows[i], max_nfev=100) for i in order), key=lambda x: x.objective)
+        # each seed's resonances moved onto the measured ones, the two sections' own values free of the pull (how
+        # the section is shared is what the seeds guess); a local fit from there, else through smoothed errors
+        own = [i for i, n in enumerate(fit.free) if n in um.own_elements()]
+        fits = []
+        for i in order:
+            aligned = aligned_start(fit, rows[i], free=own)
+            fits.append(fit.fit(x0s=aligned[None], grid=False, max_nfev=100, tol=1e-7) if aligned is not None
+                        else fit.fit_continued(rows[i], max_nfev=100))
+        seeded = min(fits, key=lambda x: x.objective)
     except CANDIDATE_FAILURES:
         return None
     seeded.unmerged = um
@@ -247,6 +257,10 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
             again = ctx.fit(first.fitted_circuit(), effects, couplings=first.couplings_freed)
             res = fit_multistart(again, starts=SPLIT_STARTS, good_enough=NOISE_MARGIN * ctx.floor, floor=ctx.floor,
                                  x0=np.concatenate([np.zeros(again.nc), first.x[again.nc:]]))
+            # splits of one winding fit within a few tens of per cent of the floor alike, and what tells them apart
+            # is the last of their misfit: the modes moved onto every misfit the noise does not account for
+            # (:func:`.realign.misfits`), not only until the objective is within NOISE_MARGIN of the floor
+            res = realigned(again, res, ctx.floor, 0.0)
         except CANDIDATE_FAILURES:
             continue
         res.structure = um.candidate.how + (" (from the design values)" if from_design else "")
@@ -257,3 +271,17 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
         if best is None or ctx.penalised(res) < ctx.penalised(best):
             best = res
     return best
+
+
+def every_section_split(ctx: Context, base: FitResult, ports: Sequence[str]) -> FitResult | None:
+    """Every section of the fitted model split (:func:`split_every_section`) and, when none of those explains the
+    data, every section of the design: the better by BIC with the merged halves' penalty
+    (:meth:`.context.Context.penalised_bic`), or None."""
+    log("missing-section: every section of the fitted model made two", ctx.progress)
+    wide = split_every_section(ctx, base, ports)
+    if wide is None or not ctx.explained(wide):
+        log("missing-section: every section of the design made two", ctx.progress)
+        other = split_every_section(ctx, base, ports, from_design=True)
+        if other is not None and (wide is None or ctx.penalised_bic(other) < ctx.penalised_bic(wide)):
+            wide = other
+    return wide

@@ -291,6 +291,11 @@ class Unmerged:
         self.total_h = float(inductance_matrix(c if respaced else circuit,
                                                self.inductors if respaced else chain.inductors).sum())
 
+    def own_elements(self) -> list[str]:
+        """Names of the two sections' own elements: inductors, resistors, series capacitors and the new node's
+        capacitor to ground (what the split shares between them, not anchored to the design)."""
+        return [n for n in (*self.first.values(), *self.second.values(), self.shunt) if n]
+
     def merged_back(self, fitted: Circuit) -> dict[str, float]:
         """Values of the split section's own elements with the two fitted sections merged into one again.
 
