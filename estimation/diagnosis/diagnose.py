@@ -540,15 +540,20 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
                 if alone is not None and alone.objective < current.objective:
                     before = alone
                 try:
-                    held = held_out_gain(before, best, configs, f, data, fixed, impedance_scale, weights=weights,
-                                         max_nfev=HOLDOUT_NFEV, prior=prior, noise=ctx.noise)
+                    held, held_se = held_out_gain(before, best, configs, f, data, fixed, impedance_scale,
+                                                  weights=weights, max_nfev=HOLDOUT_NFEV, prior=prior, noise=ctx.noise,
+                                                  with_error=True)
                 except _CANDIDATE_FAILURES:
-                    held = -np.inf
-                if held < need:
-                    log(f"{new_cause}: held-out gain {held:.3f} < {need}: refused (fits the points it was fitted to "
+                    held, held_se = -np.inf, 0.0
+                # no share of the cost needed (a model within the design against one that reaches the noise only
+                # with values far off): both fit to the noise, and the extension is refused only when it does
+                # significantly worse on the points left out (HELD_OUT_SE standard errors of the paired gain)
+                bar = -HELD_OUT_SE * held_se if need == 0 else need
+                if held < bar:
+                    log(f"{new_cause}: held-out gain {held:.3f} < {bar:.3f}: refused (fits the points it was fitted to "
                          "only)", progress)
                     failed.append({"cause": best.cause, "cost": best.cost,
-                                   "reason": f"held-out gain {held:.3f} below {need} (alternate points)"})
+                                   "reason": f"held-out gain {held:.3f} below {bar:.3f} (alternate points)"})
                     pool.pop(best.cause if best.cause in pool else new_cause)
                     deferred.add(new_cause)  # tried again once another cause is named: it may hold with it
                     if not chosen and len(new_causes) == 1:  # a section alone that takes an effect's share: with it
@@ -696,7 +701,7 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
             group = None
     if group is not None:
         g_bic = group[0].bic + np.log(group[0].n_residuals)
-        if _open(ctx, group[0], g_bic, results):
+        if _open(ctx, group[0], g_bic, results, group[1]):
             structures()
         rival = min(results.values(), key=lambda r: r.bic) if results else None
         if rival is None or g_bic < rival.bic:
@@ -730,12 +735,28 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     return baseline, None, False, baseline
 
 
-def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResult]) -> bool:
+#: Standard errors of the paired held-out gain below zero at which an extension that needs no share of the cost is
+#: refused (:func:`_select`): two, a one-sided test at about 2 %; two fits to the noise differ on the points left out
+#: by about one standard error either way.
+HELD_OUT_SE = 2.0
+
+
+def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResult], prior: Any = None) -> bool:
     """A drift answer (its fit and BIC with the drift's parameters counted) that the structures must be weighed
-    against at their best: its model does not explain the data, or a new section's fit (a local optimum of a
-    search that is not complete) comes within ``DRIFT_MIN_DBIC`` ("very strong") of it."""
+    against at their best: its model does not explain the data (above the noise, or a value besides the drift's own
+    more than ``GROSS_DRIFT`` tolerances off: the group's under its ``prior``, the freed value not counted), or a
+    new section's fit (a local optimum of a search that is not complete) comes within ``DRIFT_MIN_DBIC`` ("very
+    strong") of it."""
     section = results.get("missing-section")
-    return not ctx.explained(drift) or (section is not None and section.bic - bic < DRIFT_MIN_DBIC)
+    if section is not None and section.bic - bic < DRIFT_MIN_DBIC:
+        return True
+    before = ctx.prior
+    try:
+        ctx.prior = prior or before
+        others = [d for d in ctx.gross(drift) if d["name"].lower() != str(getattr(drift, "freed", "")).lower()]
+    finally:
+        ctx.prior = before
+    return drift.objective > NOISE_MARGIN * ctx.floor or bool(others)
 
 
 def _baseline_refitted(args: tuple[Context, Circuit, int]) -> FitResult | None:

@@ -39,7 +39,7 @@ HELD_OUT_CAP = 5.0
 def _refit_score(r: FitResult, configs: Sequence[Configuration], f: np.ndarray, data: Mapping[str, np.ndarray],
                  fixed: Sequence[str], scale: float, train: np.ndarray, test: np.ndarray, max_nfev: int,
                  weights: Mapping[str, np.ndarray] | None = None, prior: DesignPrior | None = None,
-                 noise: Mapping[str, float] | None = None) -> float:
+                 noise: Mapping[str, float] | None = None) -> np.ndarray:
     w = dict(weights or {})
     circuit = r.fitted_circuit()
     nc = r.x.size - sum(len(e.parameters) for e in r.effects)
@@ -53,19 +53,21 @@ def _refit_score(r: FitResult, configs: Sequence[Configuration], f: np.ndarray, 
     held = FrequencyFit(circuit, configs, f[test], {k: v[test] for k, v in data.items()}, fixed, r.effects, scale,
                         couplings=r.couplings, weights={k: v[test] for k, v in w.items()})
     scored = held.result(res.x)
-    if not noise:
-        return scored.cost
-    cost = 0.0
+    # each held-out point's share of the held-out cost (the cost is their sum)
+    share = np.zeros(int(np.sum(test)))
     for n, e in scored.errors.items():
         e2 = np.abs(e) ** 2 * (w[n][test] ** 2 if n in w else 1.0)
-        cost += float(np.mean(np.minimum(e2, (HELD_OUT_CAP * noise[n]) ** 2))) if n in noise else float(np.mean(e2))
-    return cost
+        if noise and n in noise:
+            e2 = np.minimum(e2, (HELD_OUT_CAP * noise[n]) ** 2)
+        share += e2 / e2.size
+    return share
 
 
 def held_out_gain(before: FitResult, after: FitResult, configs: Sequence[Configuration], f: np.ndarray,
                   data: Mapping[str, np.ndarray], fixed: Sequence[str] = (), scale: float = 1.0,
                   max_nfev: int = 15, weights: Mapping[str, np.ndarray] | None = None,
-                  prior: DesignPrior | None = None, noise: Mapping[str, float] | None = None) -> float:
+                  prior: DesignPrior | None = None, noise: Mapping[str, float] | None = None,
+                  with_error: bool = False) -> float | tuple[float, float]:
     """Fraction of the held-out cost of ``before`` that ``after`` removes (two folds: even and odd points).
 
     Parameters
@@ -92,16 +94,29 @@ def held_out_gain(before: FitResult, after: FitResult, configs: Sequence[Configu
         is); each held-out point's squared error is capped at
         ``HELD_OUT_CAP`` times it, squared. Without it, uncapped.
 
+    with_error : bool
+        Also return the gain's standard error: the held-out points' differences
+        of squared error (before minus after) are paired, and their spread over
+        the points gives the error of their sum.
+
     Returns
     -------
-    float
+    float, or (float, float) with ``with_error``
         Held-out gain (1: the extension removes all the held-out misfit; 0 or
-        less: it does not help on points it was not fitted to).
+        less: it does not help on points it was not fitted to), and its
+        standard error.
     """
     idx = np.arange(f.size)
     folds = [(idx % 2 == 0, idx % 2 == 1), (idx % 2 == 1, idx % 2 == 0)]
-    cost_b = cost_a = 0.0
+    b, a = [], []
     for train, test in folds:
-        cost_b += _refit_score(before, configs, f, data, fixed, scale, train, test, max_nfev, weights, prior, noise)
-        cost_a += _refit_score(after, configs, f, data, fixed, scale, train, test, max_nfev, weights, prior, noise)
-    return float(1 - cost_a / cost_b) if cost_b > 0 else 0.0
+        b.append(_refit_score(before, configs, f, data, fixed, scale, train, test, max_nfev, weights, prior, noise))
+        a.append(_refit_score(after, configs, f, data, fixed, scale, train, test, max_nfev, weights, prior, noise))
+    sb, sa = np.concatenate(b), np.concatenate(a)
+    cost_b = float(np.sum(sb))
+    gain = float(1 - np.sum(sa) / cost_b) if cost_b > 0 else 0.0
+    if not with_error:
+        return gain
+    d = sb - sa
+    se = float(np.sqrt(d.size) * np.std(d, ddof=1) / cost_b) if cost_b > 0 and d.size > 1 else 0.0
+    return gain, se
