@@ -72,14 +72,16 @@ class Context:
         return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
                             self.scale, self.prior if isinstance(prior, str) else prior, couplings, self.weights)
 
-    def drift(self, r: FitResult) -> list[dict[str, Any]]:
-        """Values of ``r`` moved beyond the design tolerance (none without a prior)."""
-        if self.prior is None:
+    def drift(self, r: FitResult, prior: DesignPrior | None = None) -> list[dict[str, Any]]:
+        """Values of ``r`` moved beyond the design tolerance (none without a prior); under ``prior`` when given (a
+        group's drift: its prior centred on the group's factor), else the diagnosis's."""
+        prior = prior or self.prior
+        if prior is None:
             return []
-        anchored = self.prior.anchored(r.circuit)
+        anchored = prior.anchored(r.circuit)
         values = {n: v for n, v in r.values.items() if n.lower() in anchored}
         values.update(self.merged(r))
-        return self.prior.drift(values)
+        return prior.drift(values)
 
     def merged(self, r: FitResult) -> dict[str, float]:
         """A section of the design split in two (:class:`.unmerge.Unmerged`): its halves merged back, by the
@@ -112,9 +114,10 @@ class Context:
         different values or with different couplings free, are weighed against each other."""
         return r.bic + r.n_residuals * math.log(self.penalised(r) / r.objective) if r.objective > 0 else r.bic
 
-    def gross(self, r: FitResult) -> list[dict[str, Any]]:
-        """The values of ``r`` more than ``GROSS_DRIFT`` tolerances from the design."""
-        return [d for d in self.drift(r) if d["sigmas"] > GROSS_DRIFT]
+    def gross(self, r: FitResult, prior: DesignPrior | None = None) -> list[dict[str, Any]]:
+        """The values of ``r`` more than ``GROSS_DRIFT`` tolerances from the design (under ``prior``, as
+        :meth:`drift`)."""
+        return [d for d in self.drift(r, prior) if d["sigmas"] > GROSS_DRIFT]
 
     def distorted(self, r: FitResult) -> bool:
         """``r`` moved a value more than ``GROSS_DRIFT`` tolerances from the design (never without a prior)."""

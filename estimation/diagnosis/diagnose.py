@@ -93,7 +93,7 @@ from estimation.diagnosis.fit import (CANDIDATE_FAILURES, DiagnosisError, FitRes
 from estimation.diagnosis.drift import DRIFT_MIN_DBIC, freed_fit, located_drift, relaxed_drift, with_parallel
 from estimation.diagnosis.converge import converged
 from estimation.diagnosis.holdout import held_out_gain
-from estimation.diagnosis.prior import DEFAULT_TOLERANCE, design_prior
+from estimation.diagnosis.prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from estimation.diagnosis.causes.forms import rechoose_forms
 from estimation.diagnosis.causes.realise import realise_extended
 from estimation.diagnosis.report import parallel_note
@@ -305,14 +305,15 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # section split, from the fitted values and, when those splits do not explain the data, from the design's (a
     # fitted baseline stuck above the noise keeps its poor optimum in every split started from it); run once, before
     # a drift is taken as the answer when that answer is open (:func:`_drift_answer`), else after it
-    splits_on: list[FitResult] = []
+    split_searched = False
 
     def every_split() -> None:
-        if (splits_on or not (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes)
+        nonlocal split_searched
+        if (split_searched or not (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes)
                 or not (ctx.unfit(baseline) or ctx.distorted(baseline))
                 or any(ctx.explained(r) for r in results.values())):
             return
-        splits_on.append(baseline)
+        split_searched = True
         t = time.perf_counter()
         wide = every_section_split(ctx, baseline, configuration_ports(configs))
         if wide is not None and wide.objective < baseline.objective and ctx.penalised_bic(wide) < (
@@ -741,7 +742,8 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
 HELD_OUT_SE = 2.0
 
 
-def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResult], prior: Any = None) -> bool:
+def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResult],
+          prior: DesignPrior | None = None) -> bool:
     """A drift answer (its fit and BIC with the drift's parameters counted) that the structures must be weighed
     against at their best: its model does not explain the data (above the noise, or a value besides the drift's own
     more than ``GROSS_DRIFT`` tolerances off: the group's under its ``prior``, the freed value not counted), or a
@@ -750,12 +752,8 @@ def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResu
     section = results.get("missing-section")
     if section is not None and section.bic - bic < DRIFT_MIN_DBIC:
         return True
-    before = ctx.prior
-    try:
-        ctx.prior = prior or before
-        others = [d for d in ctx.gross(drift) if d["name"].lower() != str(getattr(drift, "freed", "")).lower()]
-    finally:
-        ctx.prior = before
+    freed = str(getattr(drift, "freed", "")).lower()
+    others = [d for d in ctx.gross(drift, prior) if d["name"].lower() != freed]
     return drift.objective > NOISE_MARGIN * ctx.floor or bool(others)
 
 

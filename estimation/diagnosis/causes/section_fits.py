@@ -202,7 +202,8 @@ def _split_seeded(args: tuple[Context, Any, Any, int, bool, Sequence[Effect], np
         order = np.argsort(np.sum(r * r, axis=1))[:SPLIT_SEEDS]
         # each seed's resonances moved onto the measured ones, the two sections' own values free of the pull (how
         # the section is shared is what the seeds guess); a local fit from there, else through smoothed errors
-        own = [i for i, n in enumerate(fit.free) if n in um.own_elements()]
+        own_names = set(um.own_elements())
+        own = [i for i, n in enumerate(fit.free) if n in own_names]
         fits = []
         for i in order:
             aligned = aligned_start(fit, rows[i], free=own)
