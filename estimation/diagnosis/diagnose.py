@@ -34,10 +34,11 @@ Steps:
 3. Forward selection: the cause with the lowest Bayesian information
    criterion ``BIC = N ln(RSS/N) + k ln N`` is named if it beats the
    baseline's BIC by ``min_delta_bic`` (10: "very strong" evidence on Kass and
-   Raftery's scale) and removes at least ``min_gain`` of the cost; then each
-   remaining cause is refitted together with those named, and the best is
-   added while its BIC improves by ``min_delta_bic`` and it removes at least
-   ``min_step_gain`` of the remaining cost. Against a model that reaches the
+   Raftery's scale) and removes at least ``min_gain`` of the misfit above the
+   noise floor (:func:`_share`; none for a model at the floor already); then
+   each remaining cause is refitted together with those named, and the best
+   is added while its BIC improves by ``min_delta_bic`` and it removes at
+   least ``min_step_gain`` of what is left above the floor. Against a model that reaches the
    noise floor only by moving a value more than ``GROSS_DRIFT`` tolerances
    off the design (no explanation), a candidate that reaches it within them
    needs the BIC margin but no share of the cost. A structural cause (a missing
@@ -142,9 +143,10 @@ def diagnose_frequency(
     circuit, port : Circuit, str, optional
         Baseline given as a one-port netlist driven at ``port`` (response ``Zin``).
     min_delta_bic, min_gain : float
-        Thresholds for naming the first cause instead of ``none``.
+        Thresholds for naming the first cause instead of ``none``: the BIC margin, and the share of the misfit above
+        the noise floor the cause must remove (:func:`_share`).
     min_step_gain : float
-        Fraction of the remaining cost a further cause must remove.
+        Share of the remaining misfit above the noise floor a further cause must remove.
     max_causes : int
         Most causes named.
     causes : sequence of str, optional
@@ -460,7 +462,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         "criterion": (("" if prior is None else f"every fit penalised by a log-normal prior around the design values "
                        f"(tolerance {prior.tolerance:g}), BIC and gains on the penalised cost; ")
                       + f"forward selection by BIC: a cause is named if dBIC >= {min_delta_bic} and it removes at least "
-                      f"{min_gain} (first cause) or {min_step_gain} (further causes) of the cost left; stop at "
+                      f"{min_gain} (first cause) or {min_step_gain} (further causes) of the misfit above the noise "
+                      f"floor; stop at "
                       f"{NOISE_MARGIN} x the noise floor"),
     }
     if extended is not None:
@@ -468,6 +471,18 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     diag.wall_s = time.perf_counter() - t0
     log(f"causes: {', '.join(chosen) or 'none'} (gain {diag.gain:.3f}) in {diag.wall_s:.1f} s", progress)
     return diag
+
+
+def _share(ctx: Context, current: FitResult, share: float) -> float:
+    """The share of ``current``'s cost (penalised) a cause must remove: ``share`` of the misfit the noise does not
+    account for (the data cost above :attr:`.context.Context.floor`), none for a model at the noise already.
+
+    The share guards the BIC against a systematic misfit, on which every extra parameter gains a "very strong" BIC
+    (the BIC's likelihood assumes white residuals at the misfit's level); at the noise floor the residuals are the
+    noise's and the BIC alone decides, the evidence then lying in the prior's term (values off the design).
+    """
+    excess = max(0.0, current.cost - ctx.floor)
+    return share * min(1.0, excess / current.objective) if current.objective > 0 else share
 
 
 #: Two causes whose fits alone are this close in BIC are reported as not told apart by the data
@@ -496,7 +511,7 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
                 log("cost at the noise floor: no further cause", progress)
                 break
             best = min(pool.values(), key=lambda r: r.bic)
-            need = min_gain if not chosen else min_step_gain
+            need = _share(ctx, current, min_gain if not chosen else min_step_gain)
             # a model that reaches the noise only by moving values far off the design is no explanation: against it, a
             # candidate that reaches the noise within the design, or with fewer values far off (a value really off the
             # design stays off in every model), needs the BIC margin but no share of the cost
@@ -546,10 +561,11 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
                                                   with_error=True)
                 except _CANDIDATE_FAILURES:
                     held, held_se = -np.inf, 0.0
-                # no share of the cost needed (a model within the design against one that reaches the noise only
-                # with values far off): both fit to the noise, and the extension is refused only when it does
-                # significantly worse on the points left out (HELD_OUT_SE standard errors of the paired gain)
-                bar = -HELD_OUT_SE * held_se if need == 0 else need
+                # the share needed on the points left out as well, and the extension refused only when its gain there
+                # is significantly below it (HELD_OUT_SE standard errors of the paired gain): with no share needed (a
+                # model within the design against one that reaches the noise only with values far off, or a model at
+                # the noise already) both fit to the noise, and their held-out costs differ by about one error
+                bar = need - HELD_OUT_SE * held_se
                 if held < bar:
                     log(f"{new_cause}: held-out gain {held:.3f} < {bar:.3f}: refused (fits the points it was fitted to "
                          "only)", progress)
