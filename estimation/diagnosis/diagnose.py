@@ -463,8 +463,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                        f"(tolerance {prior.tolerance:g}), BIC and gains on the penalised cost; ")
                       + f"forward selection by BIC: a cause is named if dBIC >= {min_delta_bic} and it removes at least "
                       f"{min_gain} (first cause) or {min_step_gain} (further causes) of the misfit above the noise "
-                      f"floor; stop at "
-                      f"{NOISE_MARGIN} x the noise floor"),
+                      f"floor; stop at {NOISE_MARGIN} x the noise floor"),
     }
     if extended is not None:
         diag.realisation = realise_extended(extended, configs, f)
@@ -752,9 +751,9 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     return baseline, None, False, baseline
 
 
-#: Standard errors of the paired held-out gain below zero at which an extension that needs no share of the cost is
-#: refused (:func:`_select`): two, a one-sided test at about 2 %; two fits to the noise differ on the points left out
-#: by about one standard error either way.
+#: Standard errors of the paired held-out gain below the share needed (:func:`_share`; zero at the noise) at which a
+#: structural extension is refused (:func:`_select`): two, a one-sided test at about 2 %; two fits to the noise differ
+#: on the points left out by about one standard error either way.
 HELD_OUT_SE = 2.0
 
 
