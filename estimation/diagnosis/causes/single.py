@@ -98,12 +98,12 @@ def _to_refine(screened: list[Screened], top: int) -> list[Screened]:
 
 def _best_refined(screened: list[Screened], refine: list[Screened], refined: Sequence[FitResult | None],
                   must_beat: float, best: FitResult | None) -> FitResult | None:
-    """The best of ``best`` and a pool's refinements; a form clearly worse than the pool's best screened one is
+    """The best of ``best`` and a pool's refinements by BIC; a form clearly worse than the pool's best screened one is
     not used once a fit beats ``must_beat`` (it is fitted beside the first, not used)."""
     for i, ((cost, *_), res) in enumerate(zip(refine, refined)):
         if i and best is not None and best.objective < must_beat and cost > 2 * screened[0][0]:
             break
-        if res is not None and (best is None or res.objective < best.objective):
+        if res is not None and (best is None or res.bic < best.bic):  # the forms differ in parameter counts
             best = res
     return best
 
