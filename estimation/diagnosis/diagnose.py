@@ -30,7 +30,9 @@ Steps:
    whole group of values (:mod:`.group_drift`), the answer when its BIC is
    below every single cause's; one that does not explain the data against
    one value off the design (:func:`.drift.located_drift`), weighed the same
-   way (the freed value counted as one parameter).
+   way (the freed value counted as one parameter). Once the drift is known,
+   one other value off alone, the reported ones held at their tolerance's
+   edge, replaces them if its BIC is lower (:func:`.drift.exchanged_drift`).
 3. Forward selection: the cause with the lowest Bayesian information
    criterion ``BIC = N ln(RSS/N) + k ln N`` is named if it beats the
    baseline's BIC by ``min_delta_bic`` (10: "very strong" evidence on Kass and
