@@ -30,9 +30,7 @@ Steps:
    whole group of values (:mod:`.group_drift`), the answer when its BIC is
    below every single cause's; one that does not explain the data against
    one value off the design (:func:`.drift.located_drift`), weighed the same
-   way (the freed value counted as one parameter). Once the drift is known,
-   one other value off alone, the reported ones held at their tolerance's
-   edge, replaces them if its BIC is lower (:func:`.drift.exchanged_drift`).
+   way (the freed value counted as one parameter).
 3. Forward selection: the cause with the lowest Bayesian information
    criterion ``BIC = N ln(RSS/N) + k ln N`` is named if it beats the
    baseline's BIC by ``min_delta_bic`` (10: "very strong" evidence on Kass and
@@ -93,8 +91,7 @@ from estimation.diagnosis.evidence import (band_table, localise, noise_floor, no
     unexplained_bands)
 from estimation.diagnosis.fit import (CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit,
     configuration_ports, current_nc, significant)
-from estimation.diagnosis.drift import (DRIFT_MIN_DBIC, exchanged_drift, freed_fit, located_drift, relaxed_drift,
-                                        with_parallel)
+from estimation.diagnosis.drift import DRIFT_MIN_DBIC, freed_fit, located_drift, relaxed_drift, with_parallel
 from estimation.diagnosis.converge import converged
 from estimation.diagnosis.holdout import held_out_gain
 from estimation.diagnosis.prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
@@ -418,17 +415,6 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             baseline, group_entry = alone, None
             ctx.prior = prior = prior_before
             on_top = relaxed_drift(ctx, baseline, lambda m: log(m, progress))
-    if on_top and group_entry is None:
-        # the values reported passed local tests; one other value off the design may explain the data better
-        swapped = exchanged_drift(ctx, extended or baseline, on_top, lambda m: log(m, progress))
-        if swapped is not None:
-            swapped.structure = (extended or baseline).structure
-            if extended is not None:
-                swapped.cause = extended.cause
-                extended = swapped
-            else:
-                baseline = swapped
-            on_top = relaxed_drift(ctx, extended or baseline, lambda m: log(m, progress))
     cands = sorted(results.values(), key=lambda r: r.bic)
     diag = Diagnosis(chosen[0] if chosen else "none", baseline, extended, cands, f, data, causes=chosen, steps=steps,
                      noise=floor, failed=failed)

@@ -268,15 +268,13 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple
                   f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
 
 
-def freed_fit(args: tuple) -> FitResult | None:
-    """``(ctx, model, name, start[, circuit, held])`` to the model fitted from ``start`` with the value ``name``
-    freed from its prior (``freed`` set to it), or None when the fit fails (:func:`located_drift`). ``circuit``
-    (default the model's) has the values ``held`` fixed where they are."""
-    ctx, final, name, x0, *rest = args
-    circuit, held = rest if rest else (final.fitted_circuit(), [])
+def freed_fit(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
+    """``(ctx, model, name, start)`` to the model fitted from ``start`` with the value ``name`` freed from its prior
+    (``freed`` set to it), or None when the fit fails (:func:`located_drift`)."""
+    ctx, final, name, x0 = args
     loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
     try:
-        one = ctx.fit(circuit, final.effects, fixed=list(held), prior=loose, couplings=final.couplings)
+        one = ctx.fit(final.fitted_circuit(), final.effects, prior=loose, couplings=final.couplings)
         trial = one.fit_continued(x0, max_nfev=100, tol=1e-7)
     except CANDIDATE_FAILURES:
         return None
@@ -326,48 +324,13 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     if ctx.prior is None:
         return None
     t0 = time.perf_counter()
-    trials, t_align = one_value_trials(ctx, final)
-    best = min(trials, key=lambda t: t.bic, default=None)
-    if best is None:
-        return None
-
-    def others_gross(t: FitResult) -> bool:  # a value besides the freed one more than GROSS_DRIFT tolerances off
-        return any(d["name"].lower() != t.freed.lower() for d in ctx.gross(t))
-
-    dbic = final.bic - best.bic
-    ratio = best.values[best.freed] / ctx.prior.design[best.freed.lower()]
-    if best.objective > target or others_gross(best) or dbic < DRIFT_MIN_DBIC:
-        log(f"one value off the design: {best.freed} x{ratio:.3g} fits to {best.objective:.4g} (dBIC {dbic:.1f}): "
-            "not kept")
-        return None
-    # another value that explains the data as well (the BIC within DRIFT_MIN_DBIC): the data do not tell which
-    best.drift_alternatives = []
-    for t in sorted(trials, key=lambda t: t.bic):
-        if t is best or t.objective > target or t.bic - best.bic >= DRIFT_MIN_DBIC or others_gross(t):
-            continue
-        d = ctx.prior.design[t.freed.lower()]
-        best.drift_alternatives.append({"name": t.freed, "design": float(d), "fitted": float(t.values[t.freed]),
-                                        "ratio": float(t.values[t.freed] / d), "delta_bic": float(t.bic - best.bic)})
-        log(f"  as well explained by {t.freed} x{t.values[t.freed] / d:.3g} (dBIC {t.bic - best.bic:.1f})")
-    log(f"one value off the design: {best.freed} x{ratio:.3g} explains the data (cost {final.objective:.4g} -> "
-        f"{best.objective:.4g}, dBIC {dbic:.1f}; {t_align:.1f} s aligning, {time.perf_counter() - t0:.1f} s in all)")
-    return best
-
-
-def one_value_trials(ctx: Any, final: FitResult, held: Mapping[str, float] | None = None
-                     ) -> tuple[list[FitResult], float]:
-    """The local fits of :func:`located_drift`: each promising value freed from its prior (``freed`` set), and the
-    seconds the scan and the alignments took. ``held``: values fixed (name to value) and not tried."""
-    t0 = time.perf_counter()
-    circuit = final.fitted_circuit().with_values(dict(held)) if held else final.fitted_circuit()
-    fixed = list(held or {})
     try:
-        fit = ctx.fit(circuit, final.effects, fixed=fixed, couplings=final.couplings)
+        fit = ctx.fit(final.fitted_circuit(), final.effects, couplings=final.couplings)
     except CANDIDATE_FAILURES:
-        return [], 0.0
+        return None
     cols = fit.anchored_columns
     if not cols.size:
-        return [], 0.0
+        return None
     x_fitted = np.concatenate([np.zeros(fit.nc), final.x[current_nc(final):]])
     x_design = fit.design_vector(x_fitted)
     # each value scanned alone (the others at their design values, and at the final model's: a model far above the
@@ -386,78 +349,40 @@ def one_value_trials(ctx: Any, final: FitResult, held: Mapping[str, float] | Non
             starts.append((p, x0 if aligned is None else aligned))
     # and the values the final model already moved beyond the tolerance, each freed where it is (a resistance moves
     # no resonance, and the scan does not rank it)
-    beyond = [d["name"].lower() for d in ctx.drift(final)] if not held else []
+    beyond = [d["name"].lower() for d in ctx.drift(final)]
     for name in beyond[:LOCATE_FITS]:
         p = next((k for k, c in enumerate(cols) if fit.free[c].lower() == name), None)
         if p is not None:
             starts.append((p, x_fitted))
     t_align = time.perf_counter() - t0
-    trials = shared_map(freed_fit, [(ctx, final, fit.free[cols[p]], x0, circuit, fixed) for p, x0 in starts])
-    return [t for t in trials if t is not None], t_align
 
+    def others_gross(t: FitResult) -> bool:  # a value besides the freed one more than GROSS_DRIFT tolerances off
+        return any(d["name"].lower() != t.freed.lower() for d in ctx.gross(t))
 
-def exchanged_drift(ctx: Any, final: FitResult, kept: Sequence[Mapping[str, Any]], log: Callable[[str], None]
-                    ) -> FitResult | None:
-    """One other value off the design in place of the values reported, if it explains the data better.
-
-    Each value reported passed its test at the tolerance's edge by a local
-    refit, which stays in the basin of the fit it starts from: a fit that
-    spread a doubled capacitance to ground over a series capacitance and
-    its neighbours finds that series capacitance needed at its edge,
-    because the other basin (the capacitance to ground off alone) is not
-    within a local fit's reach. Here the values of ``kept`` are held at
-    their tolerance's nearest edge and every other value is tried alone off
-    the design as in :func:`located_drift` (the resonance scan from the
-    design values and from the model's, aligned starts, local fits). The
-    best is compared in BIC with the model with ``kept`` free of their
-    prior, each hold counted as a parameter (both models then have as many):
-    it replaces that model only if its BIC is lower, i.e. if one value off
-    fits the data better than the ones reported. It is then fitted again
-    with the held values released to their prior.
-
-    Returns
-    -------
-    FitResult or None
-        The model with the other value freed (``freed`` set to it), or ``None``.
-    """
-    names = [d["name"] for d in kept if not d.get("group") and d["name"] in final.values]
-    if ctx.prior is None or not names or len(names) != len(kept):
+    best, trials = None, []
+    for trial in shared_map(freed_fit, [(ctx, final, fit.free[cols[p]], x0) for p, x0 in starts]):
+        if trial is None:
+            continue
+        trials.append(trial)
+        if best is None or trial.bic < best.bic:
+            best = trial
+    if best is None:
         return None
-    t0 = time.perf_counter()
-    keys = {n.lower() for n in names}
-    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in keys})
-    tail = final.x[current_nc(final):]
-    try:  # the reference: the values reported, free of their prior
-        fit = ctx.fit(final.fitted_circuit(), final.effects, prior=loose, couplings=final.couplings)
-        ref = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), tail])[None], grid=False, max_nfev=60, tol=1e-7)
-    except CANDIDATE_FAILURES:
+    dbic = final.bic - best.bic
+    ratio = best.values[best.freed] / ctx.prior.design[best.freed.lower()]
+    if best.objective > target or others_gross(best) or dbic < DRIFT_MIN_DBIC:
+        log(f"one value off the design: {best.freed} x{ratio:.3g} fits to {best.objective:.4g} (dBIC {dbic:.1f}): "
+            "not kept")
         return None
-    edges = {}  # each value reported at its tolerance's nearest edge
-    for n in names:
-        d = ctx.prior.design[n.lower()]
-        edges[n] = d * float(np.exp(np.clip(np.log(ref.values[n] / d), -ctx.prior.tau, ctx.prior.tau)))
-    # every other value alone, the ones reported held at their edge
-    ln_n = np.log(ref.n_residuals)
-    scored = [(t.bic + len(edges) * ln_n, t) for t in one_value_trials(ctx, ref, held=edges)[0]  # a hold: a parameter
-              if not any(g["name"].lower() != t.freed.lower() for g in ctx.gross(t))]
-    score, best = min(scored, key=lambda s: s[0], default=(np.inf, None))
-    if best is None or score >= ref.bic:
-        log(f"{', '.join(names)} held at the tolerance's edge: "
-            + (f"{best.freed} off the design alone fits to {best.objective:.4g} against {ref.objective:.4g} (dBIC "
-               f"{ref.bic - score:.1f}): kept" if best is not None else "no other value off alone fits: kept"))
-        return None
-    name = best.freed
-    single = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k != name.lower()})
-    try:  # the held values released to their prior
-        fit = ctx.fit(best.fitted_circuit(), best.effects, prior=single, couplings=best.couplings)
-        out = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), best.x[current_nc(best):]])[None], grid=False,
-                      max_nfev=60, tol=1e-7)
-    except CANDIDATE_FAILURES:
-        return None
-    out = out if out.objective < best.objective else best
-    out.freed = name
-    ratio = out.values[name] / ctx.prior.design[name.lower()]
-    log(f"{', '.join(names)} held at the tolerance's edge: {name} x{ratio:.3g} off the design instead explains the "
-        f"data better (cost {ref.objective:.4g} -> {out.objective:.4g}, dBIC {ref.bic - score:.1f}; "
-        f"{time.perf_counter() - t0:.1f} s)")
-    return out
+    # another value that explains the data as well (the BIC within DRIFT_MIN_DBIC): the data do not tell which
+    best.drift_alternatives = []
+    for t in sorted(trials, key=lambda t: t.bic):
+        if t is best or t.objective > target or t.bic - best.bic >= DRIFT_MIN_DBIC or others_gross(t):
+            continue
+        d = ctx.prior.design[t.freed.lower()]
+        best.drift_alternatives.append({"name": t.freed, "design": float(d), "fitted": float(t.values[t.freed]),
+                                        "ratio": float(t.values[t.freed] / d), "delta_bic": float(t.bic - best.bic)})
+        log(f"  as well explained by {t.freed} x{t.values[t.freed] / d:.3g} (dBIC {t.bic - best.bic:.1f})")
+    log(f"one value off the design: {best.freed} x{ratio:.3g} explains the data (cost {final.objective:.4g} -> "
+        f"{best.objective:.4g}, dBIC {dbic:.1f}; {t_align:.1f} s aligning, {time.perf_counter() - t0:.1f} s in all)")
+    return best
