@@ -34,9 +34,6 @@ MAX_HELD = 6
 #: A drifted value is reported only if holding it at the edge of the tolerance worsens the BIC by this much ("very
 #: strong").
 DRIFT_MIN_DBIC = 10.0
-#: Most other values a hold at the tolerance's edge may push beyond it, each then held at its own edge in turn
-#: (:func:`_held_check`): the test is of the model with every value within the tolerance.
-MAX_PUSHED = 4
 
 
 def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> list[dict[str, Any]]:
@@ -256,40 +253,19 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple
                                         "ratio": float(free_fit.values[name] / ctx.prior.design[name.lower()])}
         ratio = combined(free_fit.values)
         shift = float(np.exp(np.copysign(ctx.prior.tau, np.log(ratio)))) / ratio
-        edge = {g: free_fit.values[g] * shift for g in group}
-        beyond = {e["name"].lower() for e in ctx.drift(free_fit)}
-        pushed: list[str] = []
-        start = free_fit
-        for _ in range(MAX_PUSHED + 1):
-            held = start.fitted_circuit().with_values(edge)
-            fit = ctx.fit(held, current.effects, fixed=list(edge), prior=loose, couplings=current.couplings)
-            trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), start.x[current_nc(start):]])[None],
-                            grid=False, max_nfev=40, tol=1e-6)
-            # a value the hold pushed beyond the tolerance (within it in the free fit): the data then need it or
-            # this one beyond; it is held at its edge too, and the fit repeated
-            new = [e for e in ctx.drift(trial) if e["name"].lower() not in beyond | keys
-                   and e["name"] not in edge and e["name"] in trial.values]
-            if not new or len(pushed) >= MAX_PUSHED:
-                break
-            for e in new:
-                edge[e["name"]] = ctx.prior.design[e["name"].lower()] * float(
-                    np.exp(np.copysign(ctx.prior.tau, np.log(e["ratio"]))))
-                pushed.append(e["name"])
-            start = trial
+        held = free_fit.fitted_circuit().with_values({g: free_fit.values[g] * shift for g in group})
+        fit = ctx.fit(held, current.effects, fixed=group, prior=loose, couplings=current.couplings)
+        trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), free_fit.x[current_nc(free_fit):]])[None],
+                        grid=False, max_nfev=40, tol=1e-6)
     except CANDIDATE_FAILURES:
         return d, ""
     # the freed fit carries the same prior as the held one (its own value's term left out); the hold is one
-    # parameter however many values in parallel it holds, and each value pushed to its edge stays one parameter
-    d["delta_bic"] = float(trial.bic - free_fit.bic
-                           + (len(group) - 1 + len(pushed)) * np.log(free_fit.n_residuals))
-    if pushed:
-        d["pushed"] = pushed
-    also = f" ({', '.join(pushed)} pushed to the edge too)" if pushed else ""
+    # parameter however many values in parallel it holds
+    d["delta_bic"] = float(trial.bic - free_fit.bic + (len(group) - 1) * np.log(free_fit.n_residuals))
     if d["delta_bic"] >= DRIFT_MIN_DBIC:
-        return d, (f"{name}: needed beyond the tolerance (dBIC {d['delta_bic']:.1f} at its edge{also})"
-                   if pushed else "")
+        return d, ""
     return None, (f"{name}: x{d['ratio']:.3g} off the design, but the data do not need it beyond the tolerance "
-                  f"(dBIC {d['delta_bic']:.1f} at its edge{also}): not reported")
+                  f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
 
 
 def freed_fit(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
