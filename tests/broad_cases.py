@@ -267,14 +267,23 @@ def signature(case: Case, tolerance: float = 0.2, max_nfev: int = 400, steps: in
     tolerance (``|ln(v/d)| <= ln(1 + tolerance)``) is fitted by least squares to the response without noise;
     returned is the misfit left in units of the noise, the non-centrality
     ``lambda = sum_k |ln Z_k - ln Z'_k|^2 / (sigma^2 / 2)`` of a chi-square test of the design model against the
-    data (``sigma`` the noise's RMS of ``ln Z``, half of it in each of the real and imaginary parts).
+    data (``sigma`` the noise's RMS of ``ln Z``, half of it in each of the real and imaginary parts). The fit is
+    :func:`within_tolerance`'s; a local fit, so ``lambda`` is an upper bound of the least misfit, and an effect
+    called hidden (small ``lambda``) is hidden.
+    """
+    return within_tolerance(case, tolerance, max_nfev, steps)[0]
+
+
+def within_tolerance(case: Case, tolerance: float = 0.2, max_nfev: int = 400, steps: int = 8
+                     ) -> tuple[float, Winding]:
+    """The design's structure fitted within the tolerance to the clean response: ``(lambda, winding)``.
 
     Two local fits, the smaller misfit kept: one from the truth's values clipped to the tolerance (else the
     design's), and, where the truth has the design's structure, a continuation from the truth itself (misfit
     zero): the bounds closed from the truth's values onto the tolerance in ``steps`` steps, each fit started from
-    the last. A value far off (a capacitance doubled) clipped to the edge leaves the others in another basin than
+    the last. A value far off (a capacitance doubled) clipped to its edge leaves the others in another basin than
     the one the model within the tolerance may reach by moving them together; the continuation follows that basin.
-    Both are upper bounds of the least misfit, so an effect called hidden (small ``lambda``) is hidden.
+    The winding returned has every value within the tolerance (``lambda`` is its misfit, see :func:`signature`).
     """
     d = case.design
     n = d.n
@@ -306,10 +315,10 @@ def signature(case: Case, tolerance: float = 0.2, max_nfev: int = 400, steps: in
     def jac(x):
         return solved(x)[1]
 
-    best = res(x0)
+    best, x_best = res(x0), x0
     fit = least_squares(res, x0, jac=jac, bounds=(-tau, tau), max_nfev=max_nfev, x_scale=0.05)
     if fit.cost * 2 < best @ best:
-        best = fit.fun
+        best, x_best = fit.fun, fit.x
     if same:
         x = x_truth
         for s in np.linspace(0.0, 1.0, steps + 1)[1:]:
@@ -317,10 +326,12 @@ def signature(case: Case, tolerance: float = 0.2, max_nfev: int = 400, steps: in
             hi = tau + (1 - s) * np.maximum(0.0, x_truth - tau)
             x = least_squares(res, np.clip(x, lo, hi), jac=jac, bounds=(lo, hi), max_nfev=max_nfev // 2,
                               x_scale=0.05).x
-        r = res(np.clip(x, -tau, tau))
+        x = np.clip(x, -tau, tau)
+        r = res(x)
         if r @ r < best @ best:
-            best = r
-    return float(best @ best / (case.noise ** 2 / 2))
+            best, x_best = r, x
+    v = base * np.exp(x_best)
+    return float(best @ best / (case.noise ** 2 / 2)), Winding(*np.split(v, 4), d.K)
 
 
 def reported_drift(drift: list[dict], truth: list[str] | None = None) -> set[str]:

@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from broad_cases import EFFECTS, VISIBLE, _log_z_and_gradient, _solve_many, draw, reported_drift, signature, write
+from broad_cases import (EFFECTS, VISIBLE, _log_z_and_gradient, _solve_many, draw, reported_drift, signature,
+                         within_tolerance, write)
 
 from estimation.diagnosis import diagnose_frequency
 from estimation.diagnosis.verdict import FIT_FACTOR
@@ -67,6 +68,27 @@ def test_signature_tells_hidden_effects_from_visible_ones():
     assert signature(draw(1088)) < 1.0
     assert signature(draw(1014)) > 1e3 * VISIBLE
     assert signature(draw(1089)) < 0.1 * VISIBLE
+
+
+def test_a_fault_at_the_last_node_that_the_design_within_tolerance_fits_is_hidden():
+    """Draw 1158 (three sections, 0.1 % noise): Cg3 at 1.89x, in parallel with C3 (the last section ends at
+    ground). Clipped to the tolerance the truth leaves a misfit of 1e7 noise units; followed onto the tolerance
+    (the continuation) the others move together and a design model within it fits the clean response. The witness
+    is checked with the generator's own nodal solve, one frequency at a time: every value within the tolerance and
+    the misfit below the visible level."""
+    from broad_cases import zin
+
+    case = draw(1158)
+    assert case.effect == "local" and case.drift == ["Cg3"]
+    assert signature(case, steps=0) > 1e5 * VISIBLE
+    lam, w = within_tolerance(case)
+    d = case.design
+    ratio = np.concatenate([w.R / d.R, w.L / d.L, w.Cs / d.Cs, w.Cg / d.Cg])
+    assert np.all(np.abs(np.log(ratio)) <= np.log(1.2) + 1e-12)
+    e = np.log(zin(w, case.frequency_hz)) - np.log(case.clean)
+    e.imag = (e.imag + np.pi) % (2 * np.pi) - np.pi
+    assert np.sum(np.abs(e) ** 2) / (case.noise ** 2 / 2) == pytest.approx(lam, rel=1e-6)
+    assert lam < VISIBLE
 
 
 @pytest.mark.slow
