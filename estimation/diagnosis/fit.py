@@ -625,7 +625,7 @@ class FrequencyFit:
     def fit(self, extra_starts: Sequence[Sequence[Mapping[str, float]]] | None = None, max_nfev: int = 100,
             cause: str | None = None, keep_starts: int = 3, circuit_free: bool = True,
             x0s: np.ndarray | None = None, must_beat: float | None = None, tol: float = 1e-8,
-            grid: bool = True) -> FitResult:
+            grid: bool = True, limits: tuple[np.ndarray, np.ndarray] | None = None) -> FitResult:
         """Fit from the most promising starts (screened in one batch); keep the best.
 
         Parameters
@@ -644,9 +644,13 @@ class FrequencyFit:
             screened starts are tried until one beats it or none is left.
         grid : bool
             Add the effects' start grids to ``x0s`` (always when no ``x0s``).
+        limits : (lower, upper) arrays, optional
+            Narrower bounds of the parameter vector than :meth:`bounds` (intersected with them).
         """
         t0 = time.perf_counter()
         lo, hi = self.bounds()
+        if limits is not None:
+            lo, hi = np.maximum(lo, limits[0]), np.minimum(hi, limits[1])
         if x0s is None or grid:
             starts = self.start_vectors(extra_starts)
             if x0s is not None:

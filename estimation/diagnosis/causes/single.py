@@ -31,7 +31,8 @@ from pris_cosim.circuits.circuit import Circuit
 from estimation.diagnosis.causes.catalogue import CoreLoss, Effect, effect_variants, winding_groups
 from estimation.diagnosis.context import Context, log
 from estimation.diagnosis.cores import shared_map
-from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, FrequencyFit, configuration_ports, group_names
+from estimation.diagnosis.fit import (CANDIDATE_FAILURES, FitResult, FrequencyFit, configuration_ports, current_nc,
+                                     group_names)
 from estimation.diagnosis.causes.section_fits import fit_missing_section
 
 #: A screened form: its screened cost, the effect, its fit object and the screened result.
@@ -146,7 +147,62 @@ def fit_cause(ctx: Context, cause: str, base: FitResult, must_beat: float, from_
         done = shared_map(_form_job, jobs + following)
         ahead = done[len(jobs):] if following else None
         best = _best_refined(screened, refine, done[: len(jobs)], must_beat, best)
+    if best is not None and best.effects and ctx.prior is not None and ctx.drift(base):
+        # the baseline's values beyond the tolerance may hold this cause's share: followed back onto the tolerance
+        # with the cause fitted at each step, they either return (the cause takes their share) or cannot
+        followed = onto_tolerance(ctx, base, best)
+        if followed is not None and followed.bic < best.bic:
+            best = followed
     return best, [t[1] for t in pools[0]]
+
+
+#: Steps of the bounds closing onto the tolerance, and evaluations per step (:func:`onto_tolerance`).
+ONTO_STEPS, ONTO_NFEV = 4, 40
+
+
+def onto_tolerance(ctx: Context, base: FitResult, res: FitResult) -> FitResult | None:
+    """``res`` (a cause fitted on ``base``'s values) followed from those values onto the design's tolerance.
+
+    A baseline fitted without an effect absorbs it into values moved beyond
+    the tolerance, and a fit of the effect from there stays in that basin
+    (the effect gains little while the values hold its share), while from
+    the design values its resonances are not aligned with the data's. Here
+    every value the prior holds is bounded between its design value's
+    tolerance box and where it starts, and the bounds close onto the box in
+    ``ONTO_STEPS`` steps, each fit (``ONTO_NFEV`` evaluations) started from
+    the last: the data keep the resonances aligned while the values return,
+    and the effect's parameters take what the values can no longer hold.
+    From the box the fit is released (the prior as everywhere else). A cause
+    that is really there reaches the noise with every value back within the
+    tolerance; one that is not cannot follow. Returns the released fit, or
+    ``None`` when a fit fails.
+    """
+    try:
+        fit = ctx.fit(base.fitted_circuit(), list(res.effects))
+    except CANDIDATE_FAILURES:
+        return None
+    cols = fit.anchored_columns
+    if not cols.size:
+        return None
+    tail = res.x[current_nc(res):]
+    x = np.concatenate([np.zeros(fit.nc), tail])
+    start = x.copy()
+    design = fit.design_vector(x)
+    tau = ctx.prior.tau
+    lo0, hi0 = fit.bounds()
+    try:
+        for s in np.linspace(0.0, 1.0, ONTO_STEPS + 1)[1:]:
+            lo, hi = lo0.copy(), hi0.copy()
+            off = start[cols] - design[cols]
+            lo[cols] = design[cols] - tau + (1 - s) * np.minimum(0.0, off + tau)
+            hi[cols] = design[cols] + tau + (1 - s) * np.maximum(0.0, off - tau)
+            x = np.clip(x, lo + 1e-9, hi - 1e-9)
+            x = fit.fit(x0s=x[None], grid=False, keep_starts=1, max_nfev=ONTO_NFEV, tol=1e-6, limits=(lo, hi)).x
+        out = fit.fit(x0s=x[None], grid=False, keep_starts=1, max_nfev=60, tol=1e-7)
+    except CANDIDATE_FAILURES:
+        return None
+    out.structure = res.structure
+    return out
 
 
 def single_causes(ctx: Context, todo: Sequence[str], baseline: FitResult, progress: bool
