@@ -11,6 +11,10 @@ best of the second are then fitted in full (circuit values free). A cause
 that reaches the noise floor from the fitted baseline needs no second pool,
 and once one cause does, the others start from the fitted baseline only.
 
+When the baseline has values beyond the tolerance, the best fit of each
+cause is also followed from the baseline's values back onto the tolerance
+(:func:`onto_tolerance`), and kept when its BIC is lower.
+
 Each batch (the screenings of a cause's forms; their refinements, with the
 screenings from the design values beside them) is shared with the helper
 process (:mod:`.cores`). A missing section (:mod:`.section_fits`) is fitted
