@@ -34,9 +34,9 @@ def _diagnose(case):
                               port=case["port"], progress=False, **kw)
 
 
-#: Still wrong: the baseline absorbs the skin effect and the missing section with thirteen values far off the design,
-#: and no split from the fitted model leaves that basin (docs/diagnosis-design.md); the answer is ``unexplained``.
-KNOWN_WRONG = {"cascade_missing_skin": "a missing section beside a skin effect: unexplained at 5.2x the noise floor"}
+#: Cases still answered wrongly, with the reason (none at present: ``cascade_missing_skin``, a missing section beside a
+#: skin effect, is named since each cause is also followed from the baseline's values back onto the tolerance).
+KNOWN_WRONG: dict[str, str] = {}
 
 
 @pytest.mark.slow
