@@ -188,18 +188,18 @@ def onto_tolerance(ctx: Context, base: FitResult, res: FitResult) -> FitResult |
     cols = fit.anchored_columns
     if not cols.size:
         return None
-    tail = res.x[current_nc(res):]
-    x = np.concatenate([np.zeros(fit.nc), tail])
-    start = x.copy()
-    design = fit.design_vector(x)
+    start = np.concatenate([np.zeros(fit.nc), res.x[current_nc(res):]])
+    design = fit.design_vector(start)
+    x = start
     tau = ctx.prior.tau
     lo0, hi0 = fit.bounds()
+    # how far each held value starts beyond its box, below and above (zero for a value inside it)
+    below, above = np.minimum(0.0, start[cols] - design[cols] + tau), np.maximum(0.0, start[cols] - design[cols] - tau)
     try:
         for s in np.linspace(0.0, 1.0, ONTO_STEPS + 1)[1:]:
             lo, hi = lo0.copy(), hi0.copy()
-            off = start[cols] - design[cols]
-            lo[cols] = design[cols] - tau + (1 - s) * np.minimum(0.0, off + tau)
-            hi[cols] = design[cols] + tau + (1 - s) * np.maximum(0.0, off - tau)
+            lo[cols] = design[cols] - tau + (1 - s) * below
+            hi[cols] = design[cols] + tau + (1 - s) * above
             x = np.clip(x, lo + 1e-9, hi - 1e-9)
             x = fit.fit(x0s=x[None], grid=False, keep_starts=1, max_nfev=ONTO_NFEV, tol=1e-6, limits=(lo, hi)).x
         out = fit.fit(x0s=x[None], grid=False, keep_starts=1, max_nfev=60, tol=1e-7)
