@@ -423,7 +423,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     diag.drift = ([group_entry] if group_entry else []) + on_top
     diag.baseline_drift = with_parallel(baseline.circuit, baseline.values, prior.design, ctx.drift(baseline)) \
         if prior is not None else []
-    diag.drift_alternatives = list(getattr(final, "drift_alternatives", []))
+    diag.drift_alternatives = list(getattr(final, "drift_alternatives", [])) + [
+        a for d in on_top for a in d.pop("alternatives", [])]
     first = results.get(chosen[0]) if chosen else None
     if first is not None:
         diag.cause_alternatives = [{"cause": r.cause, "delta_bic": float(r.bic - first.bic)} for r in cands

@@ -21,6 +21,7 @@ from pris_cosim.circuits.circuit import Circuit, node_name
 from estimation.diagnosis.align import aligned_start, resonance_mismatch
 from estimation.diagnosis.cores import shared_map
 from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, current_nc
+from estimation.diagnosis.onto_box import onto_box, within_box
 
 #: A fit that reaches the noise floor but moves a value more than this many tolerances from the design
 #: (``|ln(v/d)| > GROSS_DRIFT ln(1 + tolerance)``) is not an explanation: causes are sought from the design values.
@@ -49,8 +50,11 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
     each freed from the prior (if not freed already) and then held at the
     tolerance's edge on its side (the others refitted, its own prior left
     out of both), the fit must lose ``DRIFT_MIN_DBIC`` (the ``MAX_HELD``
-    furthest off are checked). The named causes and the gain are not changed
-    by this.
+    furthest off are checked). When two or more values pass, one value off
+    with every other followed back onto the tolerance may explain the data
+    better (:func:`_one_for_many`); it then stands for them, with the
+    others that explain the data as well as ``alternatives``. The named
+    causes and the gain are not changed by this.
     """
     if ctx.prior is None:
         return []
@@ -87,7 +91,122 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
         if d is not None:
             kept.append(d)
     kept = _fewest_needed(ctx, current, freed, kept, log)
+    if len(kept) >= 2:
+        one = _one_for_many(ctx, current, freed, kept, log)
+        if one is not None:
+            current = one
+            drift = ctx.drift(current)
+            checks = shared_map(_held_check, [(ctx, current, [current.freed.lower()], d) for d in drift[:MAX_HELD]])
+            kept = [d for d, _ in checks if d is not None]
+            kept = _fewest_needed(ctx, current, [current.freed.lower()], kept, log)
+            for d in kept:  # the values that explain the data as well, with the one they stand beside
+                if d["name"] == current.freed:
+                    d["alternatives"] = current.drift_alternatives
     return with_parallel(current.circuit, current.values, ctx.prior.design, kept)
+
+
+#: Values ranked by a scan (besides the values reported) tried as the one value off (:func:`_one_for_many`).
+ONE_FOR_MANY_FITS = 4
+
+
+def _one_for_many(ctx: Any, current: FitResult, freed: list[str], kept: list[dict[str, Any]],
+                  log: Callable[[str], None]) -> FitResult | None:
+    """One value off the design that explains what the several values ``kept`` explain together, if any.
+
+    A value that is really off (a capacitance to ground doubled) is pulled
+    back by the prior while its neighbours move beyond the tolerance to make
+    up for it, and the fit settles in their basin: each of them, held at its
+    edge from there, loses (the local refit does not find the other basin),
+    and two or three values are reported for one. Here each value ``v`` of
+    ``kept``, and the ``ONE_FOR_MANY_FITS`` values that alone best fit the
+    data with every other value clipped into its tolerance box (a scan over
+    ``LOCATE_RANGE``), is freed from the prior while every other value
+    returns onto the box (:func:`.onto_box.onto_box`: the bounds close from
+    where the values are, the data keeping the resonances aligned, ``v``
+    taking what they no longer hold). The best such model replaces the
+    several when its BIC, one freed value counted as one parameter, is lower
+    than theirs with ``kept`` freed (each counted). Returns it (``freed`` set
+    to ``v``) or ``None``.
+    """
+    names = [d["name"] for d in kept]
+    keys = {n.lower() for n in names} | set(freed)
+    tail = current.x[current_nc(current):]
+    try:
+        loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in keys})
+        several = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
+        x_cur = np.concatenate([np.zeros(several.nc), tail])
+        ref = several.fit(x0s=x_cur[None], grid=False, max_nfev=60, tol=1e-7)
+        whole = ctx.fit(current.fitted_circuit(), current.effects, couplings=current.couplings)
+    except CANDIDATE_FAILURES:
+        return None
+    n_log = np.log(ref.n_residuals)
+    ref_bic = ref.bic + len(keys) * n_log
+    cols = whole.anchored_columns
+    design = whole.design_vector(x_cur)
+    boxed = x_cur.copy()
+    boxed[cols] = np.clip(x_cur[cols], design[cols] - ctx.prior.tau, design[cols] + ctx.prior.tau)
+    ratios = np.linspace(np.log(LOCATE_RANGE[0]), np.log(LOCATE_RANGE[1]), LOCATE_SCAN)
+    X = np.repeat(boxed[None], cols.size * ratios.size, axis=0)
+    X[np.arange(X.shape[0]), np.repeat(cols, ratios.size)] = np.tile(ratios, cols.size) + np.repeat(design[cols],
+                                                                                                       ratios.size)
+    r = whole.residuals_batch(X)[:, : whole.n_residuals - cols.size]
+    scan = np.sum(r ** 2, axis=1).reshape(cols.size, ratios.size)
+    ranked = [whole.free[cols[p]] for p in np.argsort(scan.min(axis=1))]
+    candidates = list(dict.fromkeys(names + [n for n in ranked if n not in names][:ONE_FOR_MANY_FITS]))
+    jobs = []
+    for v in candidates:
+        p = next(k for k, c in enumerate(cols) if whole.free[c] == v)
+        jobs.append((ctx, current, v, X[p * ratios.size + int(np.argmin(scan[p]))]))
+    trials = [t for t in shared_map(_freed_onto_box, jobs) if t is not None]
+    if not trials:
+        return None
+    best = min(trials, key=lambda t: t.bic)
+    gain = ref_bic - (best.bic + n_log)
+    d = ctx.prior.design[best.freed.lower()]
+    log(f"{best.freed} x{best.values[best.freed] / d:.3g} alone, the others onto the tolerance: cost "
+        f"{best.cost:.4g}, dBIC {gain:.1f} against {', '.join(names)} together"
+        + (": the one value off" if gain > 0 else ": not kept"))
+    if gain <= 0:
+        return None
+    # another value that, alone, explains the data as well (the BIC within DRIFT_MIN_DBIC): the data do not tell which
+    best.drift_alternatives = []
+    for t in sorted(trials, key=lambda t: t.bic):
+        if t is not best and t.bic - best.bic < DRIFT_MIN_DBIC:
+            dv = ctx.prior.design[t.freed.lower()]
+            best.drift_alternatives.append({"name": t.freed, "design": float(dv), "fitted": float(t.values[t.freed]),
+                                            "ratio": float(t.values[t.freed] / dv),
+                                            "delta_bic": float(t.bic - best.bic)})
+            log(f"  as well explained by {t.freed} x{t.values[t.freed] / dv:.3g} (dBIC {t.bic - best.bic:.1f})")
+    return best
+
+
+def _freed_onto_box(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
+    """``(ctx, model, name, scanned)`` to the model with ``name`` freed from the prior and every other value within
+    its tolerance box, ``freed`` set; None when every fit fails.
+
+    Two starts: the model's values followed onto the box (:func:`.onto_box.onto_box`), and ``scanned`` (the
+    others clipped into the box, ``name`` at its best ratio of the scan) fitted within it
+    (:func:`.onto_box.within_box`). The better is kept.
+    """
+    ctx, current, name, scanned = args
+    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k != name.lower()})
+    outs = []
+    try:
+        fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
+    except CANDIDATE_FAILURES:
+        return None
+    for run in (lambda: onto_box(fit, np.concatenate([np.zeros(fit.nc), current.x[current_nc(current):]]),
+                                 ctx.prior.tau, release_nfev=None),
+                lambda: within_box(fit, scanned, ctx.prior.tau)):
+        try:
+            outs.append(run())
+        except CANDIDATE_FAILURES:
+            pass
+    if not outs:
+        return None
+    out = min(outs, key=lambda t: t.bic)
+    out.freed = name
+    return out
 
 
 def _fewest_needed(ctx: Any, current: FitResult, freed: list[str], kept: list[dict[str, Any]],

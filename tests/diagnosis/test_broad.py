@@ -210,3 +210,13 @@ def test_a_skin_effect_absorbed_by_the_baseline_is_named_once_its_values_return(
     d = _diagnose(case, tmp_path)
     assert d.causes == ["skin-effect"], (d.cause, d.candidates())
     assert not d.drift, d.drift
+
+
+@pytest.mark.slow
+def test_a_value_off_is_reported_alone_once_its_neighbours_return_onto_the_tolerance(tmp_path):
+    """Draw 1120 of the benchmark's fixed seeds (five sections, 0.39 % noise): the capacitance to ground of node 2
+    at 2.73x its design. The one-value search finds it, but the fit settles with the series capacitance of section
+    3 beyond the tolerance as well, and held at its edge from there it loses. Followed back onto the tolerance with
+    the capacitance to ground alone freed, the neighbour returns into the box at the noise floor: that value alone
+    is reported."""
+    _value_off_alone(1120, "local", "Cg2", tmp_path)

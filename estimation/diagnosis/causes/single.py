@@ -38,6 +38,7 @@ from estimation.diagnosis.cores import shared_map
 from estimation.diagnosis.fit import (CANDIDATE_FAILURES, FitResult, FrequencyFit, configuration_ports, current_nc,
                                      group_names)
 from estimation.diagnosis.causes.section_fits import fit_missing_section
+from estimation.diagnosis.onto_box import onto_box
 
 #: A screened form: its screened cost, the effect, its fit object and the screened result.
 Screened = tuple[float, Effect, FrequencyFit, FitResult]
@@ -160,10 +161,6 @@ def fit_cause(ctx: Context, cause: str, base: FitResult, must_beat: float, from_
     return best, [t[1] for t in pools[0]]
 
 
-#: Steps of the bounds closing onto the tolerance, and evaluations per step (:func:`onto_tolerance`).
-ONTO_STEPS, ONTO_NFEV = 4, 40
-
-
 def onto_tolerance(ctx: Context, base: FitResult, res: FitResult) -> FitResult | None:
     """``res`` (a cause fitted on ``base``'s values) followed from those values onto the design's tolerance.
 
@@ -171,38 +168,19 @@ def onto_tolerance(ctx: Context, base: FitResult, res: FitResult) -> FitResult |
     the tolerance, and a fit of the effect from there stays in that basin
     (the effect gains little while the values hold its share), while from
     the design values its resonances are not aligned with the data's. Here
-    every value the prior holds is bounded between its design value's
-    tolerance box and where it starts, and the bounds close onto the box in
-    ``ONTO_STEPS`` steps, each fit (``ONTO_NFEV`` evaluations) started from
-    the last: the data keep the resonances aligned while the values return,
-    and the effect's parameters take what the values can no longer hold.
-    From the box the fit is released (the prior as everywhere else). A cause
-    that is really there reaches the noise with every value back within the
-    tolerance; one that is not cannot follow. Returns the released fit, or
-    ``None`` when a fit fails.
+    the bounds of every value the prior holds close from where it starts
+    onto its tolerance box (:func:`.onto_box.onto_box`), the effect fitted
+    at each step: the data keep the resonances aligned while the values
+    return, and the effect's parameters take what the values can no longer
+    hold. A cause that is really there reaches the noise with every value
+    back within the tolerance; one that is not cannot follow. Returns the
+    released fit, or ``None`` when a fit fails.
     """
     try:
         fit = ctx.fit(base.fitted_circuit(), list(res.effects))
-    except CANDIDATE_FAILURES:
-        return None
-    cols = fit.anchored_columns
-    if not cols.size:
-        return None
-    start = np.concatenate([np.zeros(fit.nc), res.x[current_nc(res):]])
-    design = fit.design_vector(start)
-    x = start
-    tau = ctx.prior.tau
-    lo0, hi0 = fit.bounds()
-    # how far each held value starts beyond its box, below and above (zero for a value inside it)
-    below, above = np.minimum(0.0, start[cols] - design[cols] + tau), np.maximum(0.0, start[cols] - design[cols] - tau)
-    try:
-        for s in np.linspace(0.0, 1.0, ONTO_STEPS + 1)[1:]:
-            lo, hi = lo0.copy(), hi0.copy()
-            lo[cols] = design[cols] - tau + (1 - s) * below
-            hi[cols] = design[cols] + tau + (1 - s) * above
-            x = np.clip(x, lo + 1e-9, hi - 1e-9)
-            x = fit.fit(x0s=x[None], grid=False, keep_starts=1, max_nfev=ONTO_NFEV, tol=1e-6, limits=(lo, hi)).x
-        out = fit.fit(x0s=x[None], grid=False, keep_starts=1, max_nfev=60, tol=1e-7)
+        if not fit.anchored_columns.size:
+            return None
+        out = onto_box(fit, np.concatenate([np.zeros(fit.nc), res.x[current_nc(res):]]), ctx.prior.tau)
     except CANDIDATE_FAILURES:
         return None
     out.structure = res.structure
