@@ -426,6 +426,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     diag.drift_alternatives = list(getattr(final, "drift_alternatives", [])) + [
         a for d in on_top for a in d.pop("alternatives", [])]
     first = results.get(chosen[0]) if chosen else None
+    if not chosen:  # a drift that explains the data, and the causes it is barely told from
+        diag.cause_alternatives = list(getattr(baseline, "cause_ties", []))
     if first is not None:
         diag.cause_alternatives = [{"cause": r.cause, "delta_bic": float(r.bic - first.bic)} for r in cands
                                    if r is not first and r.cause not in chosen and "+" not in r.cause
@@ -728,6 +730,7 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
             ctx.prior = group[1]
             failed += [{"cause": c, "cost": r.cost, "reason": "the drift of a group explains the data with a lower BIC"}
                        for c, r in results.items()]
+            group[0].cause_ties = _ties(results, g_bic)
             return group[0], group[2], True, located_on
         log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {rival.cause} has a BIC lower by {g_bic - rival.bic:.1f}:"
             " not reported", progress)
@@ -746,10 +749,18 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
             f"{rival.bic - o_bic:.1f} higher): the value's drift explains the data, no cause", progress)
         failed += [{"cause": c, "cost": r.cost, "reason": "the drift of one value explains the data with a lower BIC"}
                    for c, r in results.items()]
+        one.cause_ties = _ties(results, o_bic)
         return one, None, True, baseline
     log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.bic:.1f}: not reported",
         progress)
     return baseline, None, False, baseline
+
+
+def _ties(results: dict[str, FitResult], drift_bic: float) -> list[dict[str, Any]]:
+    """The single causes whose BIC is within ``CAUSE_TIE_DBIC`` of a drift that explains the data (``cause``,
+    ``delta_bic``): the data tell the drift only barely from them."""
+    ranked = sorted(results.values(), key=lambda r: r.bic)
+    return [{"cause": r.cause, "delta_bic": float(r.bic - drift_bic)} for r in ranked if r.bic - drift_bic < CAUSE_TIE_DBIC]
 
 
 #: Standard errors of the paired held-out gain below the share needed (:func:`_share`; zero at the noise) at which a

@@ -155,6 +155,10 @@ def write_report(diag: Diagnosis, directory: str | Path, source: str = "") -> Pa
         lines += [f"The data tell `{data['causes'][0]}` only barely from "
                   + ", ".join(f"`{c['cause']}` (BIC {c['delta_bic']:+.1f} alone)" for c in tie)
                   + ": less than 2 in BIC, not worth more than a bare mention.", ""]
+    elif tie and data.get("drift"):
+        lines += ["The data tell the drift above only barely from "
+                  + ", ".join(f"`{c['cause']}` (BIC {c['delta_bic']:+.1f})" for c in tie)
+                  + ": less than 2 in BIC, not worth more than a bare mention.", ""]
     if not data.get("explained", True):
         lines += [("No cause tried explains the data" if not data.get("causes") else "The causes named do not explain "
                    "all of the data") + f": the returned model stays above twice the noise floor. {data.get('misfit', '')}"
