@@ -172,6 +172,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
                   else f"design {d['design']:.4g}, fitted {d['fitted']:.4g} (x{d['ratio']:.3g})"))
             if d.get("parallel"):
                 print(f"    ({parallel_note(d)})")
+        for a in out.get("drift_alternatives") or []:
+            print(f"  or {a['name']} alone: design {a['design']:.4g}, fitted {a['fitted']:.4g} (x{a['ratio']:.3g}, "
+                  f"BIC {a['delta_bic']:+.1f})")
+        for c in out.get("cause_alternatives") or []:
+            print(f"  barely told from {c['cause']} (BIC {c['delta_bic']:+.1f})")
         for c in out["candidates"]:
             print(f"  {c['cause']:<24} cost {c['cost']:.4g}  gain {c['gain']:.3f}")
         if args.report:
