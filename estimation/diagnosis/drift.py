@@ -145,18 +145,24 @@ def _one_for_many(ctx: Any, current: FitResult, freed: list[str], kept: list[dic
     design = whole.design_vector(x_cur)
     boxed = x_cur.copy()
     boxed[cols] = np.clip(x_cur[cols], design[cols] - ctx.prior.tau, design[cols] + ctx.prior.tau)
+    # each value scanned alone, the others clipped into their box, and again at their design values (the model's
+    # values may hold the others in another basin)
     ratios = np.linspace(np.log(LOCATE_RANGE[0]), np.log(LOCATE_RANGE[1]), LOCATE_SCAN)
-    X = np.repeat(boxed[None], cols.size * ratios.size, axis=0)
-    X[np.arange(X.shape[0]), np.repeat(cols, ratios.size)] = np.tile(ratios, cols.size) + np.repeat(design[cols],
-                                                                                                       ratios.size)
-    r = whole.residuals_batch(X)[:, : whole.n_residuals - cols.size]
-    scan = np.sum(r ** 2, axis=1).reshape(cols.size, ratios.size)
-    ranked = [whole.free[cols[p]] for p in np.argsort(scan.min(axis=1))]
+    scans, points = [], []
+    for origin in (boxed, design):
+        X = np.repeat(origin[None], cols.size * ratios.size, axis=0)
+        X[np.arange(X.shape[0]), np.repeat(cols, ratios.size)] = np.tile(ratios, cols.size) + np.repeat(
+            design[cols], ratios.size)
+        r = whole.residuals_batch(X)[:, : whole.n_residuals - cols.size]
+        scan = np.sum(r ** 2, axis=1).reshape(cols.size, ratios.size)
+        scans.append(scan.min(axis=1))
+        points.append(X.reshape(cols.size, ratios.size, -1)[np.arange(cols.size), np.argmin(scan, axis=1)])
+    ranked = [whole.free[cols[p]] for p in np.argsort(np.minimum(*scans))]
     candidates = list(dict.fromkeys(names + [n for n in ranked if n not in names][:ONE_FOR_MANY_FITS]))
     jobs = []
     for v in candidates:
         p = next(k for k, c in enumerate(cols) if whole.free[c] == v)
-        jobs.append((ctx, current, v, X[p * ratios.size + int(np.argmin(scan[p]))]))
+        jobs.append((ctx, current, v, [pts[p] for pts in points]))
     trials = [t for t in shared_map(_freed_onto_box, jobs) if t is not None]
     if not trials:
         return None
@@ -180,13 +186,13 @@ def _one_for_many(ctx: Any, current: FitResult, freed: list[str], kept: list[dic
     return best
 
 
-def _freed_onto_box(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
+def _freed_onto_box(args: tuple[Any, FitResult, str, list[np.ndarray]]) -> FitResult | None:
     """``(ctx, model, name, scanned)`` to the model with ``name`` freed from the prior and every other value within
     its tolerance box, ``freed`` set; None when every fit fails.
 
-    Two starts: the model's values followed onto the box (:func:`.onto_box.onto_box`), and ``scanned`` (the
-    others clipped into the box, ``name`` at its best ratio of the scan) fitted within it
-    (:func:`.onto_box.within_box`). The better is kept.
+    The starts: the model's values followed onto the box (:func:`.onto_box.onto_box`), and each point of
+    ``scanned`` (``name`` at its best ratio of a scan, the others in their box) fitted within it
+    (:func:`.onto_box.within_box`). The best is kept.
     """
     ctx, current, name, scanned = args
     loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k != name.lower()})
@@ -197,7 +203,7 @@ def _freed_onto_box(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult |
         return None
     for run in (lambda: onto_box(fit, np.concatenate([np.zeros(fit.nc), current.x[current_nc(current):]]),
                                  ctx.prior.tau, release_nfev=None),
-                lambda: within_box(fit, scanned, ctx.prior.tau)):
+                *(lambda x=x: within_box(fit, x, ctx.prior.tau) for x in scanned)):
         try:
             outs.append(run())
         except CANDIDATE_FAILURES:
