@@ -501,9 +501,11 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
         return None
     # another value that explains the data as well (the BIC within DRIFT_MIN_DBIC): the data do not tell which
     best.drift_alternatives = []
-    for t in sorted(trials, key=lambda t: t.bic):
-        if t is best or t.objective > target or t.bic - best.bic >= DRIFT_MIN_DBIC or others_gross(t):
+    named = {best.freed}
+    for t in sorted(trials, key=lambda t: t.bic):  # each value once, at its best fit
+        if t.freed in named or t.objective > target or t.bic - best.bic >= DRIFT_MIN_DBIC or others_gross(t):
             continue
+        named.add(t.freed)
         d = ctx.prior.design[t.freed.lower()]
         best.drift_alternatives.append({"name": t.freed, "design": float(d), "fitted": float(t.values[t.freed]),
                                         "ratio": float(t.values[t.freed] / d), "delta_bic": float(t.bic - best.bic)})
