@@ -83,26 +83,55 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
     # of the tolerance on its side (design x (1 + tolerance) or / (1 + tolerance); the others refitted, its own
     # prior left out of both), the fit must lose DRIFT_MIN_DBIC. A value not freed above is freed for this check
     # (the prior held it near the tolerance while the others made up for it), and reported with its freed value.
-    checks = shared_map(_held_check, [(ctx, current, freed, d) for d in drift[:MAX_HELD]])
-    kept = []
-    for d, message in checks:
-        if message:
-            log(message)
-        if d is not None:
-            kept.append(d)
-    kept = _fewest_needed(ctx, current, freed, kept, log)
+    kept = _needed(ctx, current, freed, drift, log)
     if len(kept) >= 2:
         one = _one_for_many(ctx, current, freed, kept, log)
         if one is not None:
             current = one
-            drift = ctx.drift(current)
-            checks = shared_map(_held_check, [(ctx, current, [current.freed.lower()], d) for d in drift[:MAX_HELD]])
-            kept = [d for d, _ in checks if d is not None]
-            kept = _fewest_needed(ctx, current, [current.freed.lower()], kept, log)
+            kept = _needed(ctx, current, [current.freed.lower()], ctx.drift(current), log)
             for d in kept:  # the values that explain the data as well, with the one they stand beside
                 if d["name"] == current.freed:
                     d["alternatives"] = current.drift_alternatives
     return with_parallel(current.circuit, current.values, ctx.prior.design, kept)
+
+
+def _needed(ctx: Any, current: FitResult, freed: list[str], drift: list[dict[str, Any]],
+            log: Callable[[str], None]) -> list[dict[str, Any]]:
+    """Of the values ``drift`` of ``current`` (``freed`` from the prior), those the data need beyond the tolerance:
+    each held at its edge (:func:`_held_check`, the ``MAX_HELD`` furthest off), then the fewest together
+    (:func:`_fewest_needed`)."""
+    kept = []
+    for d, message in shared_map(_held_check, [(ctx, current, freed, d) for d in drift[:MAX_HELD]]):
+        if message:
+            log(message)
+        if d is not None:
+            kept.append(d)
+    return _fewest_needed(ctx, current, freed, kept, log)
+
+
+def one_at_a_time(origin: np.ndarray, cols: np.ndarray, design: np.ndarray, log_ratios: np.ndarray) -> np.ndarray:
+    """Start vectors with one value of ``cols`` at a time set to ``log_ratios`` times its design value, the others as
+    in ``origin``: shape ``(cols.size * log_ratios.size, origin.size)``, value by value."""
+    X = np.repeat(origin[None], cols.size * log_ratios.size, axis=0)
+    X[np.arange(X.shape[0]), np.repeat(cols, log_ratios.size)] = np.tile(log_ratios, cols.size) + np.repeat(
+        design[cols], log_ratios.size)
+    return X
+
+
+def _alternatives(ctx: Any, best: FitResult, trials: Sequence[FitResult], keep: Callable[[FitResult], bool],
+                  log: Callable[[str], None]) -> list[dict[str, Any]]:
+    """The other values freed in ``trials`` that explain the data as well as ``best`` (BIC within
+    ``DRIFT_MIN_DBIC``, and ``keep``), each once at its best fit: name, design, fitted, ratio, delta_bic."""
+    out, named = [], {best.freed}
+    for t in sorted(trials, key=lambda t: t.bic):
+        if t.freed in named or t.bic - best.bic >= DRIFT_MIN_DBIC or not keep(t):
+            continue
+        named.add(t.freed)
+        d = ctx.prior.design[t.freed.lower()]
+        out.append({"name": t.freed, "design": float(d), "fitted": float(t.values[t.freed]),
+                    "ratio": float(t.values[t.freed] / d), "delta_bic": float(t.bic - best.bic)})
+        log(f"  as well explained by {t.freed} x{t.values[t.freed] / d:.3g} (dBIC {t.bic - best.bic:.1f})")
+    return out
 
 
 #: Values ranked by a scan (besides the values reported) tried as the one value off (:func:`_one_for_many`).
@@ -150,9 +179,7 @@ def _one_for_many(ctx: Any, current: FitResult, freed: list[str], kept: list[dic
     ratios = np.linspace(np.log(LOCATE_RANGE[0]), np.log(LOCATE_RANGE[1]), LOCATE_SCAN)
     scans, points = [], []
     for origin in (boxed, design):
-        X = np.repeat(origin[None], cols.size * ratios.size, axis=0)
-        X[np.arange(X.shape[0]), np.repeat(cols, ratios.size)] = np.tile(ratios, cols.size) + np.repeat(
-            design[cols], ratios.size)
+        X = one_at_a_time(origin, cols, design, ratios)
         r = whole.residuals_batch(X)[:, : whole.n_residuals - cols.size]
         scan = np.sum(r ** 2, axis=1).reshape(cols.size, ratios.size)
         scans.append(scan.min(axis=1))
@@ -175,14 +202,7 @@ def _one_for_many(ctx: Any, current: FitResult, freed: list[str], kept: list[dic
     if gain <= 0:
         return None
     # another value that, alone, explains the data as well (the BIC within DRIFT_MIN_DBIC): the data do not tell which
-    best.drift_alternatives = []
-    for t in sorted(trials, key=lambda t: t.bic):
-        if t is not best and t.bic - best.bic < DRIFT_MIN_DBIC:
-            dv = ctx.prior.design[t.freed.lower()]
-            best.drift_alternatives.append({"name": t.freed, "design": float(dv), "fitted": float(t.values[t.freed]),
-                                            "ratio": float(t.values[t.freed] / dv),
-                                            "delta_bic": float(t.bic - best.bic)})
-            log(f"  as well explained by {t.freed} x{t.values[t.freed] / dv:.3g} (dBIC {t.bic - best.bic:.1f})")
+    best.drift_alternatives = _alternatives(ctx, best, trials, lambda t: True, log)
     return best
 
 
@@ -463,10 +483,7 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     ratios = np.exp(np.linspace(np.log(LOCATE_RANGE[0]), np.log(LOCATE_RANGE[1]), LOCATE_SCAN))
     starts = []
     for origin in (x_design, x_fitted):
-        X = np.repeat(origin[None], cols.size * ratios.size, axis=0)
-        # the scanned value's ratio to its design value, whatever the origin
-        X[np.arange(X.shape[0]), np.repeat(cols, ratios.size)] = np.tile(np.log(ratios), cols.size) + np.repeat(
-            x_design[cols], ratios.size)
+        X = one_at_a_time(origin, cols, x_design, np.log(ratios))  # the ratio to the design value, whatever the origin
         mismatch = resonance_mismatch(fit, X).reshape(cols.size, ratios.size)
         for p in np.argsort(mismatch.min(axis=1))[:LOCATE_FITS]:
             x0 = X[p * ratios.size + int(np.argmin(mismatch[p]))]
@@ -500,16 +517,8 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
             "not kept")
         return None
     # another value that explains the data as well (the BIC within DRIFT_MIN_DBIC): the data do not tell which
-    best.drift_alternatives = []
-    named = {best.freed}
-    for t in sorted(trials, key=lambda t: t.bic):  # each value once, at its best fit
-        if t.freed in named or t.objective > target or t.bic - best.bic >= DRIFT_MIN_DBIC or others_gross(t):
-            continue
-        named.add(t.freed)
-        d = ctx.prior.design[t.freed.lower()]
-        best.drift_alternatives.append({"name": t.freed, "design": float(d), "fitted": float(t.values[t.freed]),
-                                        "ratio": float(t.values[t.freed] / d), "delta_bic": float(t.bic - best.bic)})
-        log(f"  as well explained by {t.freed} x{t.values[t.freed] / d:.3g} (dBIC {t.bic - best.bic:.1f})")
+    best.drift_alternatives = _alternatives(ctx, best, trials, lambda t: t.objective <= target and not others_gross(t),
+                                            log)
     log(f"one value off the design: {best.freed} x{ratio:.3g} explains the data (cost {final.objective:.4g} -> "
         f"{best.objective:.4g}, dBIC {dbic:.1f}; {t_align:.1f} s aligning, {time.perf_counter() - t0:.1f} s in all)")
     return best
