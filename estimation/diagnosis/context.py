@@ -14,7 +14,7 @@ from pris_cosim.circuits.circuit import Circuit
 from pris_cosim.models.builtin import Configuration
 
 from estimation.diagnosis.causes.catalogue import Effect
-from estimation.diagnosis.drift import GROSS_DRIFT
+from estimation.diagnosis.drift import DRIFT_MIN_DBIC, GROSS_DRIFT, design_rejected
 from estimation.diagnosis.evidence import noise_variance, residuals_white
 from estimation.diagnosis.fit import FitResult, FrequencyFit
 from estimation.diagnosis.prior import DesignPrior
@@ -149,7 +149,16 @@ class Context:
         white = None if not self.one_port or self.weights else residuals_white(r.errors)
         if r.objective > self.floor and (r.objective > NOISE_MARGIN * self.residual_floor(r) or white is False):
             return False
-        return not self.distorted(r)
+        return not self.distorted(r) and self.within_design(r)
+
+    def within_design(self, r: FitResult) -> bool:
+        """The data do not need ``r``'s values beyond the tolerance: ``r`` followed onto the tolerance box loses less
+        than ``DRIFT_MIN_DBIC`` against it with those values freed (:func:`.drift.design_rejected`, kept on ``r`` as
+        ``rejected``). A model at the noise that needs them is not an explanation within the design: a cause, or a
+        value off, is at work."""
+        if getattr(r, "rejected", None) is None:
+            r.rejected = design_rejected(self, r)
+        return r.rejected < DRIFT_MIN_DBIC
 
     def residual_floor(self, r: FitResult) -> float:
         """The noise floor estimated from the third differences of ``r``'s residuals, if below the data's.

@@ -283,9 +283,16 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # baseline adopts them and every cause is fitted again from it (at most twice)
     # (each cause keeps its best fit over the passes; no second pass once a cause reaches the noise floor)
     results, failed, variants_tried = {}, [], {}
-    passes = 0 if ctx.explained(baseline) else 3
+    # (a baseline at the noise with values beyond the tolerance is weighed against itself within the tolerance box:
+    # when the data reject the box, something the design lacks is at work, a cause or a value off, and the causes
+    # are fitted as for a baseline above the noise)
+    rejected = (0.0 if ctx.within_design(baseline) else baseline.rejected) if ctx.explained(baseline) else np.inf
+    passes = 0 if rejected < DRIFT_MIN_DBIC else 3
     if not passes:
         log("the baseline fits to the noise floor within the design tolerance: no cause is fitted", progress)
+    elif np.isfinite(rejected):
+        log(f"the baseline fits to the noise floor only with values beyond the tolerance (the data reject the "
+            f"tolerance box by dBIC {rejected:.1f}): the causes are fitted", progress)
     for attempt in range(passes):
         res_i, failed_i, variants_i = single_causes(ctx, todo, baseline, progress)
         for cause, r in res_i.items():
@@ -312,8 +319,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     def every_split() -> None:
         nonlocal split_searched
         if (split_searched or not (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes)
-                or not (ctx.unfit(baseline) or ctx.distorted(baseline))
-                or any(ctx.explained(r) for r in results.values())):
+                or not (ctx.unfit(baseline) or ctx.distorted(baseline) or rejected >= DRIFT_MIN_DBIC)
+                or any(ctx.explained(r) and (rejected < DRIFT_MIN_DBIC or not ctx.drift(r)) for r in results.values())):
             return
         split_searched = True
         t = time.perf_counter()

@@ -83,30 +83,127 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
     # of the tolerance on its side (design x (1 + tolerance) or / (1 + tolerance); the others refitted, its own
     # prior left out of both), the fit must lose DRIFT_MIN_DBIC. A value not freed above is freed for this check
     # (the prior held it near the tolerance while the others made up for it), and reported with its freed value.
-    kept = _needed(ctx, current, freed, drift, log)
+    kept, current = _needed(ctx, current, freed, drift, log)
     if len(kept) >= 2:
         one = _one_for_many(ctx, current, freed, kept, log)
         if one is not None:
-            current = one
-            kept = _needed(ctx, current, [current.freed.lower()], ctx.drift(current), log)
+            kept, current = _needed(ctx, one, [one.freed.lower()], ctx.drift(one), log)
             for d in kept:  # the values that explain the data as well, with the one they stand beside
-                if d["name"] == current.freed:
-                    d["alternatives"] = current.drift_alternatives
+                if d["name"] == one.freed:
+                    d["alternatives"] = one.drift_alternatives
     return with_parallel(current.circuit, current.values, ctx.prior.design, kept)
 
 
 def _needed(ctx: Any, current: FitResult, freed: list[str], drift: list[dict[str, Any]],
-            log: Callable[[str], None]) -> list[dict[str, Any]]:
+            log: Callable[[str], None]) -> tuple[list[dict[str, Any]], FitResult]:
     """Of the values ``drift`` of ``current`` (``freed`` from the prior), those the data need beyond the tolerance:
     each held at its edge (:func:`_held_check`, the ``MAX_HELD`` furthest off), then the fewest together
-    (:func:`_fewest_needed`)."""
+    (:func:`_fewest_needed`), then with every other value within its box (:func:`_box_needed`). Returns them and
+    the model they are reported from."""
     kept = []
     for d, message in shared_map(_held_check, [(ctx, current, freed, d) for d in drift[:MAX_HELD]]):
         if message:
             log(message)
         if d is not None:
             kept.append(d)
-    return _fewest_needed(ctx, current, freed, kept, log)
+    kept = _fewest_needed(ctx, current, freed, kept, log)
+    out, box = _box_needed(ctx, current, drift, kept, log)
+    return out, box or current
+
+
+def _units(ctx: Any, current: FitResult, entries: Sequence[dict[str, Any]]) -> list[list[str]]:
+    """The values of ``entries`` in ``current``, each with the others of its kind in parallel with it
+    (:func:`parallel_partners`): one unit to the data."""
+    units: list[list[str]] = []
+    for d in entries:
+        name = d["name"]
+        if name not in current.values or any(name in u for u in units):
+            continue
+        units.append([name] + [p for p in parallel_partners(current.circuit, name)
+                               if p.lower() in ctx.prior.design and p in current.values])
+    return units
+
+
+def _boxed(args: tuple[Any, FitResult, Sequence[str]]) -> FitResult | None:
+    """``(ctx, model, free)`` to the model with the values ``free`` freed from the prior and every other value the
+    prior holds followed onto its tolerance box (:func:`.onto_box.onto_box`, not released); None if it fails."""
+    ctx, current, free = args
+    keys = {n.lower() for n in free}
+    loose = replace(ctx.prior, design={k: v for k, v in ctx.prior.design.items() if k not in keys})
+    try:
+        fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
+        return onto_box(fit, np.concatenate([np.zeros(fit.nc), current.x[current_nc(current):]]), ctx.prior.tau,
+                        release_nfev=None)
+    except CANDIDATE_FAILURES:
+        return None
+
+
+def design_rejected(ctx: Any, model: FitResult) -> float:
+    """By how much (BIC) the data reject ``model`` with every value within the design's tolerance box.
+
+    ``model`` followed onto the box (:func:`_boxed`) is weighed against it
+    followed onto the box with the values it has beyond the tolerance freed
+    from the prior, each freed value (or values in parallel) counted as one
+    parameter. Zero when no value is beyond the tolerance (or a fit fails):
+    a model at the noise floor whose values the box holds needs no cause.
+    """
+    drift = ctx.drift(model) if ctx.prior is not None else []
+    if not drift:
+        return 0.0
+    units = _units(ctx, model, drift)
+    inside, free = shared_map(_boxed, [(ctx, model, []), (ctx, model, [n for u in units for n in u])])
+    if inside is None or free is None:
+        return 0.0
+    return float(inside.bic - (free.bic + len(units) * np.log(free.n_residuals)))
+
+
+def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept: list[dict[str, Any]],
+                log: Callable[[str], None]) -> tuple[list[dict[str, Any]], FitResult | None]:
+    """The values of ``drift`` the data need beyond the tolerance when every other returns into its box.
+
+    The checks before (each value held at its edge, then the fewest of
+    those together) leave the other values under the prior, free to move
+    beyond the tolerance to make up for the one held: two values off may
+    each pass for the other, and none is reported while the model has both
+    beyond. Here ``current`` with only ``kept`` freed, every other value
+    followed onto its box (:func:`_boxed`), is weighed against it with every
+    value of ``drift`` freed (each freed value, or values in parallel,
+    counted as one parameter). While the data reject it by
+    ``DRIFT_MIN_DBIC``, the value whose freeing fits best is added (forward
+    selection). Returns the entries to report and the boxed model they come
+    from (``None`` when ``kept`` stands).
+    """
+    units = _units(ctx, current, drift[:MAX_HELD])
+    names = {d["name"] for d in kept}
+    chosen = [i for i, u in enumerate(units) if u[0] in names]
+    if len(chosen) == len(units):
+        return kept, None
+    n_log = np.log(current.n_residuals)
+    scores: dict[tuple[int, ...], tuple[FitResult | None, float]] = {}
+
+    def score(sets: list[list[int]]) -> None:  # the boxed fits of the sets not scored yet
+        todo = [tuple(sorted(s)) for s in sets if tuple(sorted(s)) not in scores]
+        fits = shared_map(_boxed, [(ctx, current, [n for i in key for n in units[i]]) for key in todo])
+        for key, fit in zip(todo, fits):
+            scores[key] = (fit, np.inf if fit is None else fit.bic + len(key) * n_log)
+
+    every = list(range(len(units)))
+    score([chosen, every])
+    ref = scores[tuple(every)][1]
+    if not np.isfinite(ref) or scores[tuple(sorted(chosen))][1] - ref < DRIFT_MIN_DBIC:
+        return kept, None
+    while scores[tuple(sorted(chosen))][1] - ref >= DRIFT_MIN_DBIC and len(chosen) < len(units):
+        rest = [i for i in every if i not in chosen]
+        score([chosen + [i] for i in rest])
+        chosen.append(min(rest, key=lambda i: scores[tuple(sorted(chosen + [i]))][1]))
+    box = scores[tuple(sorted(chosen))][0]
+    if box is None:
+        return kept, None
+    out = ctx.prior.drift({units[i][0]: box.values[units[i][0]] for i in chosen})
+    log(f"within the tolerance together, the others beyond it freed: dBIC "
+        f"{scores[tuple(sorted(i for i in every if units[i][0] in names))][1] - ref:.1f}; the data need "
+        + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in out) + " beyond it")
+    return out, box
 
 
 def one_at_a_time(origin: np.ndarray, cols: np.ndarray, design: np.ndarray, log_ratios: np.ndarray) -> np.ndarray:
