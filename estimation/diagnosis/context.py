@@ -154,10 +154,10 @@ class Context:
     def within_design(self, r: FitResult) -> bool:
         """The data do not need ``r``'s values beyond the tolerance: ``r`` followed onto the tolerance box loses less
         than ``DRIFT_MIN_DBIC`` against it with those values freed (:func:`.drift.design_rejected`, kept on ``r`` as
-        ``rejected``). A model at the noise that needs them is not an explanation within the design: a cause, or a
-        value off, is at work."""
+        ``rejected``, and the model within the box as ``boxed``). A model at the noise that needs them is not an
+        explanation within the design: a cause, or a value off, is at work."""
         if getattr(r, "rejected", None) is None:
-            r.rejected = design_rejected(self, r)
+            r.rejected, r.boxed = design_rejected(self, r)
         return r.rejected < DRIFT_MIN_DBIC
 
     def residual_floor(self, r: FitResult) -> float:

@@ -422,6 +422,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             baseline, group_entry = alone, None
             ctx.prior = prior = prior_before
             on_top = relaxed_drift(ctx, baseline, lambda m: log(m, progress))
+    if (prior is not None and not chosen and not on_top and group_entry is None and ctx.drift(baseline)
+            and ctx.within_design(baseline) and baseline.boxed is not None and ctx.explained(baseline.boxed)):
+        baseline = baseline.boxed  # ``none``: the model returned has every value within the tolerance
     cands = sorted(results.values(), key=lambda r: r.bic)
     diag = Diagnosis(chosen[0] if chosen else "none", baseline, extended, cands, f, data, causes=chosen, steps=steps,
                      noise=floor, failed=failed)

@@ -138,23 +138,25 @@ def _boxed(args: tuple[Any, FitResult, Sequence[str]]) -> FitResult | None:
         return None
 
 
-def design_rejected(ctx: Any, model: FitResult) -> float:
-    """By how much (BIC) the data reject ``model`` with every value within the design's tolerance box.
+def design_rejected(ctx: Any, model: FitResult) -> tuple[float, FitResult | None]:
+    """By how much (BIC) the data reject ``model`` with every value within the design's tolerance box, and that
+    model.
 
     ``model`` followed onto the box (:func:`_boxed`) is weighed against it
     followed onto the box with the values it has beyond the tolerance freed
     from the prior, each freed value (or values in parallel) counted as one
-    parameter. Zero when no value is beyond the tolerance (or a fit fails):
-    a model at the noise floor whose values the box holds needs no cause.
+    parameter. Zero (and ``None``) when no value is beyond the tolerance or
+    a fit fails: a model at the noise floor whose values the box holds needs
+    no cause.
     """
     drift = ctx.drift(model) if ctx.prior is not None else []
     if not drift:
-        return 0.0
+        return 0.0, None
     units = _units(ctx, model, drift)
     inside, free = shared_map(_boxed, [(ctx, model, []), (ctx, model, [n for u in units for n in u])])
     if inside is None or free is None:
-        return 0.0
-    return float(inside.bic - (free.bic + len(units) * np.log(free.n_residuals)))
+        return 0.0, None
+    return float(inside.bic - (free.bic + len(units) * np.log(free.n_residuals))), inside
 
 
 def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept: list[dict[str, Any]],
@@ -170,7 +172,9 @@ def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept:
     value of ``drift`` freed (each freed value, or values in parallel,
     counted as one parameter). While the data reject it by
     ``DRIFT_MIN_DBIC``, the value whose freeing fits best is added (forward
-    selection). Returns the entries to report and the boxed model they come
+    selection); then, from the model with them all, the value whose return
+    into its box costs least is dropped while the data accept the box
+    (backward). Returns the entries to report and the boxed model they come
     from (``None`` when ``kept`` stands).
     """
     units = _units(ctx, current, drift[:MAX_HELD])
@@ -196,6 +200,18 @@ def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept:
         rest = [i for i in every if i not in chosen]
         score([chosen + [i] for i in rest])
         chosen.append(min(rest, key=lambda i: scores[tuple(sorted(chosen + [i]))][1]))
+    # backward: a value needed before another was freed may not be needed beside it (each dropped in turn, from the
+    # model with them all; the one whose drop costs least goes while the data still accept the box)
+    while len(chosen) > 1 and scores[tuple(sorted(chosen))][0] is not None:
+        start = scores[tuple(sorted(chosen))][0]
+        fits = shared_map(_boxed, [(ctx, start, [n for j in chosen if j != i for n in units[j]]) for i in chosen])
+        trials = [(f.bic + (len(chosen) - 1) * n_log, i, f) for i, f in zip(chosen, fits) if f is not None]
+        if not trials or min(trials, key=lambda t: t[0])[0] - ref >= DRIFT_MIN_DBIC:
+            break
+        value, drop, fit = min(trials, key=lambda t: t[0])
+        chosen.remove(drop)
+        if value < scores.get(tuple(sorted(chosen)), (None, np.inf))[1]:
+            scores[tuple(sorted(chosen))] = (fit, value)
     box = scores[tuple(sorted(chosen))][0]
     if box is None:
         return kept, None
