@@ -319,8 +319,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     def every_split() -> None:
         nonlocal split_searched
         if (split_searched or not (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes)
-                or not (ctx.unfit(baseline) or ctx.distorted(baseline) or rejected >= DRIFT_MIN_DBIC)
-                or any(ctx.explained(r) and (rejected < DRIFT_MIN_DBIC or not ctx.drift(r)) for r in results.values())):
+                or not (ctx.unfit(baseline) or ctx.distorted(baseline))
+                or any(ctx.explained(r) for r in results.values())):
             return
         split_searched = True
         t = time.perf_counter()
@@ -703,7 +703,7 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     factor one parameter) is below every cause's and below that of one value off the design alone (the other
     description of a drift with one parameter: one resistance at 3x moves its group's mean beyond the tolerance
     too). Else, with causes fitted (``search``) and the baseline not
-    explaining the data, one value of the design really off (a capacitance doubled, :func:`.drift.located_drift`)
+    explaining the data within the design (:meth:`.context.Context.within_design`), one value of the design really off (a capacitance doubled, :func:`.drift.located_drift`)
     is weighed the same way, the freed value one parameter; below them all it is the answer (drift, no cause), and
     no structure is sought for what it explains. ``failed`` gets the causes so set aside.
 
@@ -744,7 +744,7 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
             return group[0], group[2], True, located_on
         log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {rival.cause} has a BIC lower by {g_bic - rival.bic:.1f}:"
             " not reported", progress)
-    if ctx.prior is None or not search or not results or ctx.explained(baseline):
+    if ctx.prior is None or not search or not results or (ctx.explained(baseline) and ctx.within_design(baseline)):
         return baseline, None, False, located_on
     if baseline is not located_on:
         one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress))
