@@ -286,13 +286,12 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # (a baseline at the noise with values beyond the tolerance is weighed against itself within the tolerance box:
     # when the data reject the box, something the design lacks is at work, a cause or a value off, and the causes
     # are fitted as for a baseline above the noise)
-    rejected = (0.0 if ctx.within_design(baseline) else baseline.rejected) if ctx.explained(baseline) else np.inf
-    passes = 0 if rejected < DRIFT_MIN_DBIC else 3
+    passes = 0 if ctx.explained(baseline) and ctx.within_design(baseline) else 3
     if not passes:
         log("the baseline fits to the noise floor within the design tolerance: no cause is fitted", progress)
-    elif np.isfinite(rejected):
+    elif ctx.explained(baseline):
         log(f"the baseline fits to the noise floor only with values beyond the tolerance (the data reject the "
-            f"tolerance box by dBIC {rejected:.1f}): the causes are fitted", progress)
+            f"tolerance box by dBIC {baseline.rejected:.1f}): the causes are fitted", progress)
     for attempt in range(passes):
         res_i, failed_i, variants_i = single_causes(ctx, todo, baseline, progress)
         for cause, r in res_i.items():
@@ -702,10 +701,10 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     A whole group of values off the design by one factor (:mod:`.group_drift`) is the answer when its BIC (the
     factor one parameter) is below every cause's and below that of one value off the design alone (the other
     description of a drift with one parameter: one resistance at 3x moves its group's mean beyond the tolerance
-    too). Else, with causes fitted (``search``) and the baseline not
-    explaining the data within the design (:meth:`.context.Context.within_design`), one value of the design really off (a capacitance doubled, :func:`.drift.located_drift`)
-    is weighed the same way, the freed value one parameter; below them all it is the answer (drift, no cause), and
-    no structure is sought for what it explains. ``failed`` gets the causes so set aside.
+    too). Else, with causes fitted (``search``) and the baseline not explaining the data within the design
+    (:meth:`.context.Context.within_design`), one value of the design really off (a capacitance doubled,
+    :func:`.drift.located_drift`) is weighed the same way, the freed value one parameter; below them all it is the
+    answer (drift, no cause), and no structure is sought for what it explains. ``failed`` gets the causes so set aside.
 
     A drift is taken as the answer on the best fit of every rival: when it is open (its model does not explain
     the data, or a new section's fit comes within ``DRIFT_MIN_DBIC`` of it), ``structures`` (the search of every

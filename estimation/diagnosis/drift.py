@@ -366,13 +366,7 @@ def _fewest_needed(ctx: Any, current: FitResult, freed: list[str], kept: list[di
     are one unit, as in :func:`_held_check`: held with their combination at
     the edge, each keeping its share, the hold counted as one parameter.
     """
-    units: list[list[str]] = []
-    for d in kept:
-        name = d["name"]
-        if name not in current.values or any(name in u for u in units):
-            continue
-        units.append([name] + [p for p in parallel_partners(current.circuit, name)
-                               if p.lower() in ctx.prior.design and p in current.values])
+    units = _units(ctx, current, kept)
     if len(units) < 2:
         return kept
     tail = current.x[current_nc(current):]

@@ -261,6 +261,7 @@ def test_none_comes_with_every_value_within_the_tolerance(seed, tmp_path):
     assert d.cause == "none" and not d.drift and d.explained
     assert not d.baseline_drift, d.baseline_drift
     w = case.design
-    design = {f"{k}{i + 1}": v for k, arr in (("R", w.R), ("L", w.L), ("C", w.Cs), ("Cg", w.Cg)) for i, v in enumerate(arr)}
+    design = {f"{k}{i + 1}": v for k, arr in (("R", w.R), ("L", w.L), ("C", w.Cs), ("Cg", w.Cg))
+              for i, v in enumerate(arr)}
     ratios = {n: d.baseline.values[n] / v for n, v in design.items() if n in d.baseline.values}
     assert all(abs(np.log(r)) <= np.log1p(0.2) + 1e-6 for r in ratios.values()), ratios
