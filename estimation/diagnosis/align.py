@@ -22,8 +22,11 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import least_squares, linear_sum_assignment
 
+from scipy.special import ndtri
+
+from estimation.diagnosis.evidence import noise_variance
 from estimation.diagnosis.fit import FrequencyFit
-from estimation.diagnosis.causes.unmerge import resonance_frequencies
+from estimation.resonances import find_resonances
 
 #: Pull towards the start values: a value moved by ``tau`` (one tolerance, or ``ln 1.2`` without a prior) weighs
 #: as much as a resonance 1 % off.
@@ -34,6 +37,9 @@ UNPAIRED = 0.5
 ALIGN_NFEV = 60
 #: Model resonances counted: those within this factor of the measured band.
 BAND_MARGIN = 1.5
+#: False-alarm probability of a measured resonance over all the points of a response: a peak or dip counts when its
+#: prominence exceeds what the noise of two neighbouring points reaches this rarely (:func:`measured_modes`).
+MODE_ALPHA = 1e-3
 
 
 def port_roots(fit: FrequencyFit, x: np.ndarray, index: int, f_lo: float, f_hi: float
@@ -93,12 +99,31 @@ def _paired(measured: np.ndarray, model: np.ndarray) -> np.ndarray:
     return out
 
 
+def measured_modes(f: np.ndarray, h: np.ndarray, alpha: float = MODE_ALPHA) -> tuple[np.ndarray, np.ndarray]:
+    """Peaks and dips of ``|h|`` (Hz) that stand above the response's own noise.
+
+    A mode weakly observable at the port (a pole almost cancelled by a zero)
+    leaves a wiggle of a fraction of a dB over a few points, narrower than
+    any smoothing; a local fit does not move a model's mode across more than
+    its width, so such a mode must be aligned too. Unsmoothed, a peak or dip
+    counts when its prominence exceeds ``z`` standard deviations of the
+    difference of two points' ``20 log10 |h|`` (the noise estimated from the
+    data, :func:`.evidence.noise_variance`, half of it in ``ln |h|``), ``z``
+    the normal quantile of ``1 - alpha / N`` over the ``N`` points.
+    """
+    sd_db = 20 / np.log(10) * np.sqrt(noise_variance(f, h) / 2)
+    z = float(ndtri(1 - alpha / max(f.size, 1)))
+    found = find_resonances(f, h, min_prominence_db=max(z * np.sqrt(2) * sd_db, 1e-6), smooth_decades=0.0)
+    freq = np.array([r.frequency_hz for r in found])
+    parallel = np.array([r.kind == "parallel" for r in found], bool)
+    return (freq[parallel], freq[~parallel]) if freq.size else (freq, freq)
+
+
 def _targets(fit: FrequencyFit) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """(configuration index, measured peaks, measured dips) of every measured port impedance with resonances, Hz."""
     targets = []
     for i, name in _impedances(fit):
-        freq, parallel = resonance_frequencies(fit.f, fit.measured[name])
-        peaks, dips = freq[parallel], freq[~parallel]
+        peaks, dips = measured_modes(fit.f, fit.measured[name])
         if peaks.size + dips.size:
             targets.append((i, peaks, dips))
     return targets

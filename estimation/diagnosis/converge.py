@@ -33,7 +33,8 @@ CONVERGE_NFEV = 300
 _PROVENANCE = ("merged_back", "from_design", "unmerged")
 
 
-def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: None) -> FitResult:
+def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: None, structure: bool = False
+              ) -> FitResult:
     """``r`` refitted from its own values to convergence (one-port data; else ``r`` as it is).
 
     Parameters
@@ -44,6 +45,9 @@ def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: Non
         The model just named (circuit values and effect parameters).
     log : callable, optional
         Receives one progress line when the refit lowers the objective.
+    structure : bool
+        Refit a model with a new section too (the reference an extension's gain is measured against,
+        :func:`.causes.extend.extensions`; not the model the selection goes on from, see above).
 
     Returns
     -------
@@ -51,7 +55,7 @@ def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: Non
         The refit when its objective (cost plus design penalty, dimensionless) is lower, else ``r``; the
         refit keeps ``r``'s structure, causes and provenance.
     """
-    if not ctx.one_port or r.structure:
+    if not ctx.one_port or (r.structure and not structure):
         return r
     try:
         fit = ctx.fit(r.fitted_circuit(), r.effects, couplings=r.couplings)

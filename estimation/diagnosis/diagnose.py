@@ -93,13 +93,14 @@ from estimation.diagnosis.fit import (CANDIDATE_FAILURES, DiagnosisError, FitRes
     configuration_ports, current_nc, significant)
 from estimation.diagnosis.drift import DRIFT_MIN_DBIC, freed_fit, located_drift, relaxed_drift, with_parallel
 from estimation.diagnosis.converge import converged
+from estimation.diagnosis.causes.extend import extensions
 from estimation.diagnosis.holdout import held_out_gain
 from estimation.diagnosis.prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from estimation.diagnosis.causes.forms import rechoose_forms
 from estimation.diagnosis.causes.realise import realise_extended
 from estimation.diagnosis.report import parallel_note
 from estimation.diagnosis.result import Diagnosis
-from estimation.diagnosis.causes.section_fits import (every_section_split, fit_missing_section, section_pairs,
+from estimation.diagnosis.causes.section_fits import (every_section_split, section_pairs,
     split_every_section)
 from estimation.diagnosis.causes.single import single_causes, start_tails
 from estimation.diagnosis.causes.unmerge import missing_modes, resolved_points
@@ -534,7 +535,8 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
                     not structural and best.objective <= NOISE_MARGIN * ctx.floor
                     and len(ctx.gross(best)) < len(ctx.gross(current)))):
                 need = 0.0
-            if not significant(current.bic, current.objective, best.bic, best.objective, min_delta_bic, need):
+            ref = getattr(best, "reference", current)  # an extension's gain: between converged fits (.causes.extend)
+            if not significant(ref.bic, ref.objective, best.bic, best.objective, min_delta_bic, need):
                 break
             new_causes = [c for c in best.causes if c not in chosen]
             new_cause = new_causes[-1] if any(c in STRUCTURAL for c in new_causes) and len(new_causes) > 1 else \
@@ -588,13 +590,13 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
                         pool.update(section_pairs(ctx, results, baseline, have=pool))
                     continue
             for other in new_causes[:-1] if len(new_causes) > 1 else []:  # a pair: the effect named with the section
-                steps.append({"cause": other, "joint": True, "gain": 1 - best.objective / current.objective,
-                              "delta_bic": current.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
+                steps.append({"cause": other, "joint": True, "gain": 1 - best.objective / ref.objective,
+                              "delta_bic": ref.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
                               "total_gain": 1 - best.objective / baseline.objective, "model": best.structure})
                 chosen.append(other)
             new_cause = new_causes[-1]
-            steps.append({"cause": new_cause, "gain": 1 - best.objective / current.objective,
-                          "delta_bic": current.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
+            steps.append({"cause": new_cause, "gain": 1 - best.objective / ref.objective,
+                          "delta_bic": ref.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
                           "total_gain": 1 - best.objective / baseline.objective,
                           "model": best.structure + ("; " if best.structure and best.effects else "")
                           + ", ".join(e.label for e in best.effects)})
@@ -608,7 +610,7 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
             pool = {}
             if len(chosen) >= max_causes or ctx.settled(current):
                 continue
-            pool = _extensions(ctx, current, remaining, results, variants_tried)
+            pool = extensions(ctx, current, remaining, results, variants_tried)
 
         # ---- backward check: a cause made redundant by those named after it is dropped
         if len(chosen) > 1:
@@ -627,32 +629,8 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
         if not remaining:
             break
         log("forms chosen again: " + ", ".join(remaining) + " measured again against the model", progress)
-        pool = _extensions(ctx, current, remaining, results, variants_tried)
+        pool = extensions(ctx, current, remaining, results, variants_tried)
     return current, chosen, steps
-
-
-def _extensions(ctx: Context, current: FitResult, causes: Sequence[str], results: dict[str, FitResult],
-                variants_tried: dict[str, list[Effect]]) -> dict[str, FitResult]:
-    """Each of ``causes`` fitted together with ``current`` (:func:`_extend`): the fits that lower the objective."""
-    pool = {}
-    # independent fits, shared with the helper process (:mod:`.cores`; the batches within each run where it runs)
-    fitted = shared_map(_extension_fitted, [(ctx, current, cause, results[cause], variants_tried.get(cause, []))
-                                            for cause in causes])
-    for cause, (res, seconds) in zip(causes, fitted):
-        if res is None or res.objective >= current.objective:
-            continue
-        pool[cause] = res
-        log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.objective / current.objective:.3f}, "
-             f"dBIC {current.bic - res.bic:.1f} ({seconds:.1f} s)", ctx.progress)
-    return pool
-
-
-def _extension_fitted(args: tuple[Context, FitResult, str, FitResult, list[Effect]]
-                      ) -> tuple[FitResult | None, float]:
-    """``current`` plus one cause (:func:`_extend`) and the seconds it took (:func:`_extensions`)."""
-    ctx, current, cause, single, variants = args
-    t = time.perf_counter()
-    return _extend(ctx, current, cause, single, variants), time.perf_counter() - t
 
 
 # ============================================================================== fitting causes
@@ -878,106 +856,6 @@ def _without_effect(args: tuple[Context, FitResult, int, float]) -> FitResult | 
 def _topology(circuit: Circuit) -> list[tuple[str, str, tuple[str, ...]]]:
     """Element names, kinds and nodes (values left out)."""
     return [(e.name.lower(), e.kind, tuple(e.nodes)) for e in circuit.elements]
-
-
-def _extend(ctx: Context, current: FitResult, cause: str, single: FitResult, variants: Sequence[Effect]
-            ) -> FitResult | None:
-    """``current`` plus ``cause``, warm-started from ``current`` and from the cause's own single fit.
-
-    Every form and group in ``variants`` is screened against ``current`` (:func:`_extension_screened`); the single
-    fit's form and the ``EXTEND_FORMS`` best others are then fitted in full. With more forms than that, the others
-    are ranked by a short fit with the circuit values free (``RANK_NFEV`` evaluations from each screened start): the
-    order of the forms on the baseline says little once other causes are named (beside a lamination core loss a skin
-    effect on every winding fitted to the noise, while on the baseline it ranked fifth of nine), and with the
-    circuit values held a form hardly moves from the current model, whose values took the effect's share.
-    """
-    if cause == "missing-section":
-        return fit_missing_section(ctx, current, current.effects, must_beat=current.objective)
-    circuit = current.fitted_circuit()
-    own = single.effects[0]
-    starts = {}
-    for eff in [own] + [v for v in variants if v.label != own.label]:
-        fit, pres = _extension_screened(ctx, current, circuit, eff, single if eff is own else None)
-        if pres:
-            starts[eff.label] = (fit, pres)
-    others = [lab for lab in starts if lab != own.label]
-    if len(others) > EXTEND_FORMS:
-        rank = {}
-        for lab in others:
-            fit, pres = starts[lab]
-            short = []
-            for pre in pres:
-                try:
-                    short.append(fit.fit(x0s=pre.x[None], grid=False, keep_starts=1, max_nfev=RANK_NFEV, tol=1e-6))
-                except _CANDIDATE_FAILURES:
-                    continue
-            if short:
-                starts[lab], rank[lab] = (fit, short), min(r.objective for r in short)
-        others = sorted(rank, key=rank.get)
-    best = None
-    for label in ([own.label] if own.label in starts else []) + others[:EXTEND_FORMS]:
-        fit, pres = starts[label]
-        for pre in pres:
-            try:
-                res = fit.fit(x0s=pre.x[None], grid=False, keep_starts=1, max_nfev=50, must_beat=current.objective,
-                              tol=1e-6)
-            except _CANDIDATE_FAILURES:
-                continue
-            res.structure = current.structure
-            res.causes = list(current.causes) + [cause]
-            res.cause = "+".join(res.causes)
-            if best is None or res.bic < best.bic:  # forms differ in their parameter counts
-                best = res
-    return best
-
-
-#: Forms of a cause fitted in full when it extends a model, besides its single fit's form, and the evaluations of
-#: the short fits that rank them when there are more (:func:`_extend`).
-EXTEND_FORMS = 2
-RANK_NFEV = 10
-
-
-def _extension_screened(ctx: Context, current: FitResult, circuit: Circuit, eff: Effect, single: FitResult | None
-                        ) -> tuple[FrequencyFit | None, list[FitResult]]:
-    """``eff``'s parameters alone fitted beside ``current``'s effects (:func:`_extend`): the fit and the screened
-    results (from the current values and, with a design prior, from the design values: the current values absorbed
-    what the named causes left, the design values did not). ``single``: the cause's single fit, whose parameters
-    are one more start."""
-    cur_tail = list(current.x[current_nc(current):])
-    try:
-        fit = ctx.fit(circuit, list(current.effects) + [eff], couplings=current.couplings)
-    except _CANDIDATE_FAILURES:
-        return None, []
-    tails = start_tails(ctx, fit, eff)
-    if single is not None:
-        tails.insert(0, list(single.x[current_nc(single):]))
-    pres = []
-    for circ in [np.zeros(fit.nc)] + ([dx] if (dx := _design_x(ctx, fit)) is not None else []):
-        x0s = np.array([list(circ) + cur_tail + t for t in tails])
-        try:
-            pres.append(fit.fit(x0s=x0s, grid=False, circuit_free=False, max_nfev=40, keep_starts=2))
-        except _CANDIDATE_FAILURES:
-            continue
-    return fit, pres
-
-
-def _design_x(ctx: Context, fit: FrequencyFit) -> np.ndarray | None:
-    """The circuit part of ``fit``'s parameter vector at the design values (``None`` without a design prior).
-
-    Values the prior does not anchor (elements of a changed section, added elements) keep their start.
-    """
-    if ctx.prior is None:
-        return None
-    anchored = ctx.prior.anchored(fit.circuit)
-    x = np.zeros(fit.nc)
-    for i, n in enumerate(fit.free):
-        d = ctx.prior.design.get(n.lower())
-        if d and n.lower() in anchored and fit.start[i] > 0:
-            x[i] = np.log(d / fit.start[i])
-    if not np.any(x):
-        return None
-    lo, hi = fit.bounds()
-    return np.clip(x, lo[: fit.nc] + 1e-9, hi[: fit.nc] - 1e-9)
 
 
 def load_baseline(model_name: str | None) -> Model | None:

@@ -20,7 +20,7 @@ from pris_cosim.circuits.circuit import Circuit, node_name
 
 from estimation.diagnosis.align import aligned_start, resonance_mismatch
 from estimation.diagnosis.cores import shared_map
-from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, current_nc
+from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, FrequencyFit, current_nc
 from estimation.diagnosis.onto_box import onto_box, within_box
 
 #: A fit that reaches the noise floor but moves a value more than this many tolerances from the design
@@ -534,6 +534,49 @@ def freed_fit(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
     return trial
 
 
+def release_gains(fit: FrequencyFit, x: np.ndarray) -> np.ndarray:
+    """Predicted fall of the weighted sum of squared residuals when each anchored value's prior is released.
+
+    The score (Lagrange multiplier) test of each value's prior: with that
+    prior's residual removed, one Gauss-Newton step from the fitted model
+    predicts how far the cost falls, to second order. A model that holds a
+    value really off the design spreads it over several values, each pulled
+    back by the prior; its resonances are aligned with the data's already,
+    so a scan of one value's ratio does not rank the values (every ratio
+    misaligns them alike), but the value whose release gains most is the
+    first to free (:func:`located_drift`).
+
+    Parameters
+    ----------
+    fit : FrequencyFit
+        The fit, with its design prior (:attr:`.fit.FrequencyFit.anchored_columns`).
+    x : numpy.ndarray
+        The fitted parameter vector (an optimum of ``fit``'s residuals).
+
+    Returns
+    -------
+    numpy.ndarray
+        One gain per anchored column, in the units of the residuals' sum of squares (half the cost as
+        :meth:`.fit.FrequencyFit.fit` ranks it); zeros without a prior or when the Jacobian is not finite.
+    """
+    cols = fit.anchored_columns
+    gains = np.zeros(cols.size)
+    if not cols.size:
+        return gains
+    r = fit.residuals(x)
+    J = fit.jacobian(x)
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
+        return gains
+    n_data = r.size - cols.size  # the prior's residuals come last, one per anchored column
+    for k in range(cols.size):
+        keep = np.ones(r.size, bool)
+        keep[n_data + k] = False
+        step = np.linalg.lstsq(J[keep], -r[keep], rcond=None)[0]
+        after = r[keep] + J[keep] @ step
+        gains[k] = float(r @ r - after @ after)
+    return gains
+
+
 #: Range (ratios to the design) and points of the scan of each value tried as the one off the design
 #: (:func:`located_drift`).
 LOCATE_RANGE = (0.25, 4.0)
@@ -560,7 +603,10 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     pulled towards their origin (:func:`.align.aligned_start`) and fitted
     locally, that value freed from its prior; so are the values the final
     model moved beyond the tolerance (a resistance moves no resonance),
-    from where they are. The best is kept if it
+    and the ``LOCATE_FITS`` values whose prior, released, the score test
+    predicts to lower the cost most (:func:`release_gains`: the
+    scan from a model at the noise aligns every value alike), from where
+    they are. The best is kept if it
     reaches ``target`` (the noise margin) without gross drift of the values
     still held, and beats the final model's BIC by ``DRIFT_MIN_DBIC``. The
     other values fitted that reach ``target`` too, with a BIC within
@@ -599,10 +645,12 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     # and the values the final model already moved beyond the tolerance, each freed where it is (a resistance moves
     # no resonance, and the scan does not rank it)
     beyond = [d["name"].lower() for d in ctx.drift(final)]
-    for name in beyond[:LOCATE_FITS]:
-        p = next((k for k, c in enumerate(cols) if fit.free[c].lower() == name), None)
-        if p is not None:
-            starts.append((p, x_fitted))
+    from_fitted = [p for p, c in enumerate(cols) if fit.free[c].lower() in beyond[:LOCATE_FITS]]
+    # and the values whose prior, released, is predicted to lower the cost most (the score test): a model at the
+    # noise has its resonances aligned already, and the scan from it does not rank the values
+    gains = release_gains(fit, x_fitted)
+    from_fitted += [int(p) for p in np.argsort(-gains)[:LOCATE_FITS] if gains[p] > 0 and p not in from_fitted]
+    starts += [(p, x_fitted) for p in from_fitted]
     t_align = time.perf_counter() - t0
 
     def others_gross(t: FitResult) -> bool:  # a value besides the freed one more than GROSS_DRIFT tolerances off

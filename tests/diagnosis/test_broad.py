@@ -265,3 +265,20 @@ def test_none_comes_with_every_value_within_the_tolerance(seed, tmp_path):
               for i, v in enumerate(arr)}
     ratios = {n: d.baseline.values[n] / v for n, v in design.items() if n in d.baseline.values}
     assert all(abs(np.log(r)) <= np.log1p(0.2) + 1e-6 for r in ratios.values()), ratios
+
+
+@pytest.mark.slow
+def test_a_weak_mode_is_aligned_and_the_fit_reaches_the_truths_level(tmp_path):
+    """Draw 1174 of the benchmark's fixed seeds (seven sections, Cg5 x1.95, 964 points, 1.1 % noise) has a mode
+    weakly observable at the port: a pole and a zero at 196.9 kHz, a wiggle of under 1 dB over two points. A model
+    with that mode a few per cent away passes as at the noise (the data's floor estimate is 13 % high on this
+    record) while it misses the record by about 14 % of the noise's variance, 290 in BIC. The model the diagnosis
+    returns fits the record as closely as the truth itself does (the generator's own noise realisation,
+    ``|ln(z / z_clean)|^2``), and the drift it reports is at Cg5 or its neighbour Cg4."""
+    case = draw(1174)
+    assert case.effect == "local" and case.drift == ["Cg5"]
+    d = _diagnose(case, tmp_path)
+    truth_cost = float(np.mean(np.abs(np.log(case.z / case.clean)) ** 2))
+    final = d.best or d.baseline
+    assert final.cost <= 1.03 * truth_cost, (final.cost, truth_cost)
+    assert not d.causes and reported_drift(d.drift, case.drift) & {"Cg4", "Cg5"}, (d.cause, d.drift)

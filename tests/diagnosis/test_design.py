@@ -6,6 +6,7 @@ truth is in ``cases.json`` (see the README there).
 """
 
 import json
+from dataclasses import replace
 import math
 import subprocess
 import sys
@@ -16,6 +17,7 @@ import pytest
 
 import pris_cosim
 from estimation.diagnosis import diagnose_frequency
+from estimation.diagnosis.drift import release_gains
 from estimation.diagnosis.fit import FrequencyFit
 from estimation.diagnosis.prior import design_prior
 from pris_cosim.frf.response import Response
@@ -185,3 +187,41 @@ def test_drift_on_a_value_in_parallel_names_its_partners_and_their_combination()
     assert drift[0].get("parallel") is None  # the input is not changed
     text = "\n".join(drift_lines({"tolerance": 0.2, "drift": out}))
     assert "Cg2 is in parallel with C2" in text and "x1.8" in text
+
+
+_R, _L, _C1, _C2 = 2.0, 1.0e-3, 0.5e-9, 2.0e-9
+
+
+def _two_modes(f: np.ndarray, c2: float) -> np.ndarray:
+    s = 2j * np.pi * f
+    return 1 / (1 / (_R + s * _L + 1 / (s * c2)) + s * _C1)
+
+
+def _two_mode_fit(f, z, prior):
+    net = parse_netlist(f"* two modes\nC1 p 0 {_C1}\nR1 p a {_R}\nL1 a b {_L}\nC2 b 0 {_C2}\n")
+    cfg = [Configuration("default", "p", (), (Response("Zin"),))]
+    return FrequencyFit(net, cfg, f, {"Zin": z}, prior=prior)
+
+
+def test_the_value_off_the_design_is_the_one_whose_release_gains_most():
+    """The score test of each design value's prior (:func:`.drift.release_gains`) on a two-mode network written out
+    in closed form, ``Z = (R + s L + 1/(s C2)) || 1/(s C1)``, with C2 1.6 times its design value in the data: C2's
+    release is ranked first, and the fall it predicts agrees with the refit's with C2's prior removed."""
+    f = np.logspace(4, 6.5, 300)
+    rng = np.random.default_rng(5)
+    z = _two_modes(f, 1.6 * _C2) * np.exp(0.02 / np.sqrt(2) * (rng.standard_normal(f.size)
+                                                                 + 1j * rng.standard_normal(f.size)))
+    design = {"R1": _R, "L1": _L, "C1": _C1, "C2": _C2}
+    # a prior weighted as for 70 % noise: it holds C2 back, and L1 and C1 move to make up for it
+    prior = design_prior(design, 0.2, noise_cost=0.5, n_frequencies=f.size, n_responses=1)
+    fit = _two_mode_fit(f, z, prior)
+    held = fit.fit(max_nfev=300)
+    gains = release_gains(fit, held.x)
+    names = [fit.free[c] for c in fit.anchored_columns]
+    assert names[int(np.argmax(gains))] == "C2", dict(zip(names, gains))
+    # the fall predicted for C2 against the refit with its prior removed, from the same values
+    loose = _two_mode_fit(f, z, replace(prior, design={k: v for k, v in prior.design.items() if k != "c2"}))
+    refit = loose.fit(x0s=held.x[None], grid=False, keep_starts=1, max_nfev=300)
+    before = float(np.sum(fit.residuals(held.x) ** 2))
+    after = float(np.sum(loose.residuals(refit.x) ** 2))
+    assert abs(np.max(gains) - (before - after)) <= 0.1 * (before - after), (gains, before - after)
