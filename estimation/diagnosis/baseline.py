@@ -67,9 +67,9 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
         The start vector (default: the circuit at its values, the effects at
         their first grid start).
     floor : float, optional
-        The noise floor's cost. Given, a fit that ends above ``good_enough``
-        has its modes moved onto where it misses the data
-        (:func:`.realign.realigned`).
+        The noise floor's cost. Given, a fit that still misses the data
+        beyond the noise at some point (above ``good_enough`` or not) has
+        its modes moved onto where it misses (:func:`.realign.realigned`).
     """
     x0 = fit.start_vectors()[0] if x0 is None else np.asarray(x0, float)
     # with a helper process (:mod:`.cores`), the random starts' short fits are handed to it before the fit from the
@@ -86,8 +86,10 @@ def fit_multistart(fit: FrequencyFit, starts: int = BASELINE_STARTS, spread: flo
             best = fit.fit(x0s=short.x[None], grid=False, keep_starts=1, max_nfev=max_nfev)
             best.wall_s += first.wall_s + short.wall_s
             best.alternative = first  # the optimum reached from the given values: structures are sought from it too
-    if floor is not None and best.objective > good_enough:
-        best = realigned(fit, best, floor, good_enough)
+    if floor is not None:
+        # a model at the noise in total may still miss a weak mode: its misfit is a point beyond what the noise
+        # reaches anywhere in the record (:func:`.realign.misfits`), whatever the cost
+        best = realigned(fit, best, floor, 0.0)
     return best
 
 
