@@ -22,6 +22,7 @@ from estimation.diagnosis.align import aligned_start, resonance_mismatch
 from estimation.diagnosis.cores import shared_map
 from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, FrequencyFit, current_nc
 from estimation.diagnosis.onto_box import onto_box, within_box
+from estimation.diagnosis.realign import realigned
 
 #: A fit that reaches the noise floor but moves a value more than this many tolerances from the design
 #: (``|ln(v/d)| > GROSS_DRIFT ln(1 + tolerance)``) is not an explanation: causes are sought from the design values.
@@ -54,11 +55,20 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
     with every other followed back onto the tolerance may explain the data
     better (:func:`_one_for_many`); it then stands for them, with the
     others that explain the data as well as ``alternatives``. The named
-    causes and the gain are not changed by this.
+    causes and the gain are not changed by this. Nothing is reported when
+    the data do not reject the model within the tolerance box
+    (:meth:`.context.Context.within_design`, the joint test of every value
+    at its edge).
     """
     if ctx.prior is None:
         return []
     drift = ctx.drift(final)
+    if drift and ctx.within_design(final):
+        # the box's best fit (from the model, or from the design values realigned) is not rejected against every
+        # value beyond the tolerance freed: the data need none of them there
+        log("beyond the tolerance, but the data do not reject the model within it (dBIC "
+            f"{final.rejected:.1f}): " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift) + " not reported")
+        return []
     if drift:
         log("beyond the tolerance before relaxing: " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift))
     current, freed = final, []
@@ -156,7 +166,30 @@ def design_rejected(ctx: Any, model: FitResult) -> tuple[float, FitResult | None
     inside, free = shared_map(_boxed, [(ctx, model, []), (ctx, model, [n for u in units for n in u])])
     if inside is None or free is None:
         return 0.0, None
+    from_design = _design_boxed(ctx, model)
+    if from_design is not None and from_design.bic < inside.bic:
+        inside = from_design
     return float(inside.bic - (free.bic + len(units) * np.log(free.n_residuals))), inside
+
+
+def _design_boxed(ctx: Any, model: FitResult) -> FitResult | None:
+    """The best fit within the box reached from the design values rather than from ``model`` (:func:`design_rejected`).
+
+    Followed onto the box, a model can stop in another basin than the box's best: its values return while a
+    weak mode stays where they put it. From the design values, with the resonances aligned
+    (:func:`.align.aligned_start`), the fit within the box is realigned onto its misfits
+    (:func:`.realign.realigned`) as the baseline is; the realigned fit counts when every value stays within the
+    tolerance, else the fit within the box. None when a fit fails.
+    """
+    try:
+        fit = ctx.fit(model.fitted_circuit(), model.effects, couplings=model.couplings)
+        x = fit.design_vector(np.concatenate([np.zeros(fit.nc), model.x[current_nc(model):]]))
+        aligned = aligned_start(fit, x)
+        boxed = within_box(fit, x if aligned is None else aligned, ctx.prior.tau, max_nfev=200)
+        moved = realigned(fit, boxed, ctx.floor, 0.0)
+    except CANDIDATE_FAILURES:
+        return None
+    return moved if moved is not boxed and not ctx.drift(moved) else boxed
 
 
 def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept: list[dict[str, Any]],

@@ -282,3 +282,17 @@ def test_a_weak_mode_is_aligned_and_the_fit_reaches_the_truths_level(tmp_path):
     final = d.best or d.baseline
     assert final.cost <= 1.03 * truth_cost, (final.cost, truth_cost)
     assert not d.causes and reported_drift(d.drift, case.drift) & {"Cg4", "Cg5"}, (d.cause, d.drift)
+
+
+@pytest.mark.slow
+def test_a_fit_at_the_noise_that_misses_a_weak_mode_is_realigned(tmp_path):
+    """Draw 1123 of the benchmark's fixed seeds (six sections, 973 points, 0.14 % noise, a skin effect far below the
+    noise): the data's floor estimate is 20 % above the noise's variance, and a model with its sixth mode at 145 kHz
+    instead of 160 kHz passed as at the noise with L5 reported off. The model returned fits the record as closely
+    as the truth itself (the generator's noise realisation), with no value beyond the tolerance."""
+    case = draw(1123)
+    assert case.effect == "skin" and signature(case) < 1.0
+    d = _diagnose(case, tmp_path)
+    truth_cost = float(np.mean(np.abs(np.log(case.z / case.clean)) ** 2))
+    assert (d.best or d.baseline).cost <= 1.03 * truth_cost
+    assert not d.causes and not d.drift, (d.cause, d.drift)
