@@ -390,7 +390,8 @@ class CoreLoss(Effect):
                                                   description="exponent of the approach to a"))
 
     def resistor(self, circuit: Circuit, groups: Groups) -> str:
-        return core_loss_resistor(circuit) or "Rcore"
+        # found on the circuit the groups were taken from: a realised ladder's R || L sections are not the core loop
+        return groups.core_resistor or "Rcore"
 
     def nested_in(self, other: Effect) -> bool:
         """The causal form (one relaxation time) is the relaxation form with ``beta = 1``."""
