@@ -71,3 +71,9 @@ def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: Non
             setattr(res, name, getattr(r, name))
     log(f"  {r.cause} refitted to convergence: {r.objective:.4g} -> {res.objective:.4g}")
     return res
+
+
+def converged_job(args: tuple[Any, FitResult]) -> FitResult:
+    """``(ctx, r)`` to :func:`converged` ``(ctx, r)``: one job of a batch shared with the helper process."""
+    ctx, r = args
+    return converged(ctx, r)

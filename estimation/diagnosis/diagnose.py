@@ -92,7 +92,7 @@ from estimation.diagnosis.evidence import (band_table, localise, noise_floor, no
 from estimation.diagnosis.fit import (CANDIDATE_FAILURES, DiagnosisError, FitResult, FrequencyFit,
     configuration_ports, current_nc, significant)
 from estimation.diagnosis.drift import DRIFT_MIN_DBIC, freed_fit, located_drift, relaxed_drift, with_parallel
-from estimation.diagnosis.converge import converged
+from estimation.diagnosis.converge import converged, converged_job
 from estimation.diagnosis.causes.extend import extensions
 from estimation.diagnosis.holdout import held_out_gain
 from estimation.diagnosis.prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
@@ -341,6 +341,19 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if answered:
         results, passes = {}, 0
     every_split()
+    if passes and results and ctx.one_port:
+        # the single causes compared between converged fits, as the further causes are (:mod:`.causes.extend`): a
+        # fit stopped after tens of evaluations shows less than its form holds, and by a share that differs between
+        # forms; the baseline is refitted too, the reference their gains are measured against
+        keys = [c for c, r in results.items() if not r.structure]
+        *fits, polished = shared_map(converged_job, [(ctx, results[c]) for c in keys] + [(ctx, baseline)])
+        for c, r in zip(keys, fits):
+            if r is not results[c]:
+                log(f"  {c} refitted to convergence: {results[c].objective:.4g} -> {r.objective:.4g}", progress)
+                results[c] = r
+        if polished is not baseline:
+            log(f"baseline refitted to convergence: {baseline.objective:.4g} -> {polished.objective:.4g}", progress)
+            baseline = polished
     for cause in list(results):
         if results[cause].objective >= baseline.objective:
             failed.append({"cause": cause, "cost": results.pop(cause).cost,

@@ -56,18 +56,21 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
     better (:func:`_one_for_many`); it then stands for them, with the
     others that explain the data as well as ``alternatives``. The named
     causes and the gain are not changed by this. Nothing is reported when
-    the data do not reject the model within the tolerance box
-    (:meth:`.context.Context.within_design`, the joint test of every value
-    at its edge).
+    a fit with every value within the tolerance box has a BIC no higher
+    than ``final``'s own (:meth:`.context.Context.within_design` keeps it as
+    ``boxed``): ``final`` then sits in a poorer basin than the box's best,
+    and the tests of its values at their edges, started from it, would
+    weigh that basin rather than the data.
     """
     if ctx.prior is None:
         return []
     drift = ctx.drift(final)
-    if drift and ctx.within_design(final):
-        # the box's best fit (from the model, or from the design values realigned) is not rejected against every
-        # value beyond the tolerance freed: the data need none of them there
-        log("beyond the tolerance, but the data do not reject the model within it (dBIC "
-            f"{final.rejected:.1f}): " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift) + " not reported")
+    if drift and ctx.within_design(final) and final.boxed is not None and final.boxed.bic <= final.bic:
+        # a fit with every value within the tolerance (from the model, or from the design values realigned) has a
+        # BIC no higher than the model's own: the model sits in a poorer basin, and the data need none of its values
+        # beyond the tolerance
+        log(f"beyond the tolerance, but a fit within it is {final.bic - final.boxed.bic:.1f} lower in BIC: "
+            + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift) + " not reported")
         return []
     if drift:
         log("beyond the tolerance before relaxing: " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift))
