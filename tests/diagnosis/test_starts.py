@@ -217,3 +217,23 @@ def test_lamination_core_loss_is_realised_by_a_passive_ladder_even_with_all_the_
         _, note, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 10m\n", p, 1e3, 1e7, f)
         q = (1 + 1j) * np.sqrt(f / p["fc"]) / 2
         _assert_within(z, 2.0 + 2j * np.pi * f * 10e-3 * (1 - d + d * np.tanh(q) / q))
+
+
+def test_core_loss_realised_after_a_skin_ladder_replaces_the_core_resistor_not_a_ladder_section():
+    """The effects are realised one after the other on one circuit: the skin effect's ladder (parallel R-L sections
+    in series) comes first, and the core loss must then replace ``Rcore`` across the port, not a ladder section that
+    also sits in parallel with an inductor. Against ``Z_c || (Z_R(f) + j w L)`` written out here, with
+    ``Z_c = a (j f/b) / (1 + j f/b)`` and ``Z_R`` the skin effect's relaxation form."""
+    net = parse_netlist("* one winding section and a core-loss resistor\nR1 n1 x 2.0\nL1 x 0 100u\nRcore n1 0 5k\n")
+    groups = winding_groups(net, ["n1"])  # taken once, from the circuit as fitted
+    skin, core = SkinEffect(form="relaxation", f_ref=1e3, f_max=1e7), CoreLoss(form="causal", f_ref=1e3, f_max=1e7)
+    ps, pc = {"a": 1.0, "b": 0.5, "fc": 3e4}, {"a": 5e3, "b": 2e5}
+    realised, _ = skin.realise(net, groups, ps, 1e3, 1e7)
+    realised, _ = core.realise(realised, groups, pc, 1e3, 1e7)
+    assert not realised.has_element("Rcore")
+    f = np.logspace(3, 7, 60)
+    z = ResponseModel(realised, "n1", responses=[Response("Zin")]).evaluate(f)["Zin"]
+    x = 1j * f / pc["b"]
+    zc = pc["a"] * x / (1 + x)
+    winding = 2.0 * (1 + ps["a"] * ((1 + 1j * f / ps["fc"]) ** ps["b"] - 1)) + 2j * np.pi * f * 100e-6
+    _assert_within(z, 1 / (1 / zc + 1 / winding))
