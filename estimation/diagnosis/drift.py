@@ -539,12 +539,18 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple
             moved = ctx.prior.drift({name: free_fit.values[name]})
             d = moved[0] if moved else {**d, "fitted": float(free_fit.values[name]),
                                         "ratio": float(free_fit.values[name] / ctx.prior.design[name.lower()])}
-        ratio = combined(free_fit.values)
-        shift = float(np.exp(np.copysign(ctx.prior.tau, np.log(ratio)))) / ratio
-        held = free_fit.fitted_circuit().with_values({g: free_fit.values[g] * shift for g in group})
-        fit = ctx.fit(held, current.effects, fixed=group, prior=loose, couplings=current.couplings)
-        trial = fit.fit(x0s=np.concatenate([np.zeros(fit.nc), free_fit.x[current_nc(free_fit):]])[None],
-                        grid=False, max_nfev=40, tol=1e-6)
+        edge = float(np.exp(np.copysign(ctx.prior.tau, np.log(combined(free_fit.values)))))
+        # the profile at the edge is the lowest cost of any model holding it there: fitted from the freed model
+        # moved onto the edge and from the model before freeing moved onto it (a freed value that wanders off
+        # while the others follow it leaves the held fit far from the basin the model was in)
+        trials = []
+        for start in (free_fit,) if free_fit is current else (free_fit, current):
+            shift = edge / combined(start.values)
+            held = start.fitted_circuit().with_values({g: start.values[g] * shift for g in group})
+            fit = ctx.fit(held, current.effects, fixed=group, prior=loose, couplings=current.couplings)
+            trials.append(fit.fit(x0s=np.concatenate([np.zeros(fit.nc), start.x[current_nc(start):]])[None],
+                                  grid=False, max_nfev=40, tol=1e-6))
+        trial = min(trials, key=lambda t: t.bic)
     except CANDIDATE_FAILURES:
         return d, ""
     # the freed fit carries the same prior as the held one (its own value's term left out); the hold is one
