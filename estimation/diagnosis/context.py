@@ -21,7 +21,9 @@ from estimation.diagnosis.prior import DesignPrior
 from estimation.diagnosis.verdict import FIT_FACTOR
 
 MAX_BASELINE_RMS = 2.3  # complex-log RMS error (20 dB) beyond which the baseline "does not fit at all"
-#: Selection stops once the cost is within this factor of the noise floor.
+#: Selection stops once the cost is within this factor of the noise floor: about two standard deviations of a
+#: perfect model's cost over the estimated floor (the estimate's spread, 0.10 on the broad draws, and the cost's own,
+#: ``1/sqrt(N)`` for ``N`` complex points), a one-sided test at about 2 %.
 NOISE_MARGIN = 1.25
 #: Causes that add circuit elements: named only if they also pass the held-out check (:mod:`.holdout`).
 STRUCTURAL = ("missing-section",)
