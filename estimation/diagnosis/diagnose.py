@@ -384,6 +384,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # it may never reach the model of the effects alone)
     opts = dict(min_delta_bic=min_delta_bic, min_gain=min_gain, min_step_gain=min_step_gain, max_causes=max_causes)
     current, chosen, steps = _select(ctx, baseline, pool, results, variants_tried, failed, **opts)
+    section_tie: list[dict[str, Any]] = []
     if any(c in STRUCTURAL for c in chosen) and (len(chosen) > 1 or not ctx.explained(current)):
         alt_pool = {c: r for c, r in pool.items() if not any(s in c.split("+") for s in STRUCTURAL)}
         if alt_pool:
@@ -393,13 +394,18 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             # kept when it is better both ways: a lower BIC and a data cost no higher (under the prior, a model
             # that fits the data worse can win the BIC on the penalty of the values a section moved), or a lower
             # BIC at the noise floor (both fit to the noise: what the section adds to the fit is noise)
-            if alt[1] and alt[0].bic < current.bic and (alt[0].cost <= current.cost or ctx.settled(alt[0])):
+            # a BIC lower by less than CAUSE_TIE_DBIC is a tie ("not worth more than a bare mention"): it does not
+            # overturn the selection, and the causes without the section are reported beside it
+            if (alt[1] and alt[0].bic < current.bic - CAUSE_TIE_DBIC
+                    and (alt[0].cost <= current.cost or ctx.settled(alt[0]))):
                 log(f"{', '.join(alt[1])} without the section: BIC lower by {current.bic - alt[0].bic:.1f} "
                      f"than {', '.join(chosen)}, cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against "
                      f"{current.cost:.4g} + {current.penalty:.4g}: kept", progress)
                 current, chosen, steps = alt
                 failed += alt_failed
             else:
+                if alt[1] and abs(alt[0].bic - current.bic) < CAUSE_TIE_DBIC:
+                    section_tie = [{"cause": " + ".join(alt[1]), "delta_bic": float(alt[0].bic - current.bic)}]
                 log(f"without the section ({', '.join(alt[1]) or 'none'}): BIC {alt[0].bic - current.bic:+.1f}, "
                      f"cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against {current.cost:.4g} + {current.penalty:.4g}: the "
                      "section stays", progress)
@@ -455,6 +461,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         diag.cause_alternatives = [{"cause": r.cause, "delta_bic": float(r.bic - first.bic)} for r in cands
                                    if r is not first and r.cause not in chosen and "+" not in r.cause
                                    and abs(r.bic - first.bic) < CAUSE_TIE_DBIC]
+        diag.cause_alternatives += [t for t in section_tie if t["cause"] not in
+                                    {a["cause"] for a in diag.cause_alternatives}]
     if diag.drift:
         log("values beyond the design tolerance in the final model: "
              + ", ".join(f"{d['name']} {d['design']:.4g} -> {d['fitted']:.4g} (x{d['ratio']:.3g})" for d in diag.drift
