@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+from scipy.optimize import minimize
 
 from estimation.resonances import find_resonances
 
@@ -125,11 +126,11 @@ def noise_variance(f: np.ndarray, h: np.ndarray, sd: np.ndarray | None = None) -
         lf = np.log(np.asarray(f, float))
         x = 0.5 * (lf[1:-2] + lf[2:-1])  # the centre of each difference's four points
         t = 2 * (x - x.min()) / np.ptp(x) - 1 if np.ptp(x) > 0 else np.zeros(x.size)
-        theta, _ = clipped_exponential_scale(np.abs(d) ** 2, np.vander(t, NOISE_DEGREE + 1, increasing=True))
+        theta = clipped_exponential_scale(np.abs(d) ** 2, np.vander(t, NOISE_DEGREE + 1, increasing=True))
         return float(np.mean(theta)) / 20
     s2 = np.asarray(sd, float) ** 2
     u = np.abs(d) ** 2 / (s2[3:] + 9 * s2[2:-1] + 9 * s2[1:-2] + s2[:-3])
-    return float(clipped_exponential_scale(u, np.ones((u.size, 1)))[0][0]) / float(np.mean(1.0 / s2))
+    return float(clipped_exponential_scale(u, np.ones((u.size, 1)))[0]) / float(np.mean(1.0 / s2))
 
 
 #: Points above this many times the fitted scale are left out of it (:func:`clipped_exponential_scale`): an
@@ -139,17 +140,18 @@ CLIP = 3.0
 NOISE_DEGREE = 2
 
 
-def clipped_exponential_scale(a: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, float]:
+def clipped_exponential_scale(a: np.ndarray, X: np.ndarray) -> np.ndarray:
     """The scale (mean) of exponentially distributed values whose upper tail holds outliers, ``log`` of it
-    linear in the columns of ``X``, and its censored log-likelihood.
+    linear in the columns of ``X``.
 
     Maximum likelihood of ``a_k ~ Exp(theta_k)``, ``log theta = X b``
-    (Newton's method with step halving), over the points below
-    ``CLIP theta_k``; the mean of an exponential variable below ``CLIP``
-    times its mean is ``g = 1 - CLIP e^-CLIP / (1 - e^-CLIP)`` of that mean,
-    so the fitted scale is divided by ``g``, and the points are chosen again
-    until they no longer change. With one constant column this is the mean of
-    the points below ``CLIP`` times it, over ``g``.
+    (a convex problem, :func:`scipy.optimize.minimize` with its exact
+    Hessian), over the points below ``CLIP theta_k``; the mean of an
+    exponential variable below ``CLIP`` times its mean is
+    ``g = 1 - CLIP e^-CLIP / (1 - e^-CLIP)`` of that mean, so the fitted
+    scale is divided by ``g``, and the points are chosen again until they
+    no longer change. With one constant column this is the mean of the
+    points below ``CLIP`` times it, over ``g``.
 
     Parameters
     ----------
@@ -160,49 +162,36 @@ def clipped_exponential_scale(a: np.ndarray, X: np.ndarray) -> tuple[np.ndarray,
 
     Returns
     -------
-    theta : numpy.ndarray
+    numpy.ndarray
         The scale at each value, in the units of ``a``; zeros for an all-zero sample.
-    loglik : float
-        ``sum(-log theta_k - a_k / theta_k)`` over the points kept, ``-CLIP`` for each point above ``CLIP theta_k``
-        (the probability of exceeding it).
     """
     a = np.asarray(a, float)
     n = a.size
     if not n or not np.any(a > 0):
-        return np.zeros(n), 0.0
-    g = 1.0 - CLIP * np.exp(-CLIP) / (1.0 - np.exp(-CLIP))
+        return np.zeros(n)
+    log_g = np.log(1.0 - CLIP * np.exp(-CLIP) / (1.0 - np.exp(-CLIP)))
     b = np.zeros(X.shape[1])
     b[0] = np.log(np.median(a[a > 0]) / np.log(2))  # the first column is the constant
     keep = np.ones(n, bool)
     for _ in range(100):
         b = _exponential_fit(X[keep], a[keep], b)
-        b[0] -= np.log(g)  # the kept points' mean is g of the scale
+        b[0] -= log_g  # the kept points' mean is g of the scale
         new = a < CLIP * np.exp(X @ b)
         if np.array_equal(new, keep) or not new.any():
             break
         keep = new
-        b[0] += np.log(g)  # refitted from where the kept points put it
-    theta = np.exp(X @ b)
-    loglik = float(np.sum(-np.log(theta[keep]) - a[keep] / theta[keep]) - CLIP * np.count_nonzero(~keep))
-    return theta, loglik
+        b[0] += log_g  # refitted from where the kept points put it
+    return np.exp(X @ b)
 
 
 def _exponential_fit(X: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Maximum likelihood of ``a ~ Exp(exp(X b))`` from ``b``: minimises ``sum(X b + a exp(-X b))``."""
-    def objective(v: np.ndarray) -> float:
-        eta = X @ v
-        return float(np.sum(eta + a * np.exp(-np.clip(eta, -700, 700))))
-    for _ in range(60):
-        eta = X @ b
-        r = a * np.exp(-np.clip(eta, -700, 700))
-        step = np.linalg.lstsq((X * r[:, None]).T @ X, X.T @ (1 - r), rcond=None)[0]
-        t, now = 1.0, objective(b)
-        while objective(b - t * step) > now and t > 1e-6:
-            t /= 2
-        b = b - t * step
-        if np.max(np.abs(t * step)) < 1e-10:
-            break
-    return b
+    """Maximum likelihood of ``a ~ Exp(exp(X b))`` from ``b``: the minimum of ``sum(X b + a exp(-X b))``."""
+    def rate(v: np.ndarray) -> np.ndarray:
+        return a * np.exp(-np.clip(X @ v, -700, 700))
+
+    sol = minimize(lambda v: float(np.sum(X @ v + rate(v))), b, method="trust-exact",
+                   jac=lambda v: X.T @ (1 - rate(v)), hess=lambda v: (X * rate(v)[:, None]).T @ X)
+    return sol.x
 
 
 #: Lags of the whiteness test of the residuals (:func:`residuals_white`).
