@@ -67,6 +67,9 @@ class Context:
     weights: dict[str, np.ndarray] = field(default_factory=dict)
     #: Points quiet enough to show resonances, by response (:func:`.unmerge.resolved_points`); empty: all.
     resolved: dict[str, np.ndarray] = field(default_factory=dict)
+    #: One value off the design set aside for a cause with a lower BIC, weighed again against the final answer
+    #: (:func:`.diagnose._whole_answer`); ``answer_bic`` set on it.
+    drift_aside: FitResult | None = None
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
             prior: DesignPrior | None | str = "same", couplings: Sequence[str] = ()) -> FrequencyFit:

@@ -427,6 +427,11 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                 if alone is not None:
                     baseline, group_entry = alone, None
                     ctx.prior = prior = prior_before
+    aside = ctx.drift_aside
+    if aside is not None and group_entry is None:
+        taken = _whole_answer(ctx, aside, extended or baseline, chosen, results)
+        if taken is not None:
+            baseline, extended, current, chosen, steps = taken, None, taken, [], []
     on_top = relaxed_drift(ctx, extended or baseline, lambda m: log(m, progress)) if prior is not None else []
     if group_entry is not None and extended is None and len(on_top) == 1 and on_top[0]["name"] in baseline.values:
         # one value beyond the group's tolerance on top of it: the same backward step as for a value the one-value
@@ -759,9 +764,36 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
                    for c, r in results.items()]
         one.cause_ties = _ties(results, o_bic)
         return one, None, True, baseline
-    log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.bic:.1f}: not reported",
+    log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.bic:.1f}: set aside",
         progress)
+    one.answer_bic = float(o_bic)  # weighed again against the answer the selection gives (:func:`_whole_answer`)
+    ctx.drift_aside = one
     return baseline, None, False, baseline
+
+
+def _whole_answer(ctx: Context, aside: FitResult, final: FitResult, chosen: list[str],
+                  results: dict[str, FitResult]) -> FitResult | None:
+    """One value off the design set aside for a cause whose single fit had a lower BIC (:func:`_drift_answer`),
+    weighed against the answer the selection gave (``final``, its causes ``chosen``), both whole: their BIC with
+    every value freed from the prior counted as one parameter. The cause that set the drift aside may not be named
+    in the end (a new section refused on the points it was not fitted to), and what the selection names instead
+    must then beat the drift itself. Returns ``aside`` (its ``cause_ties`` set) when its BIC is the lower, else
+    None."""
+    n = final.n_residuals
+    final_bic = final.bic + np.log(n) * (1 if getattr(final, "freed", None) else 0)
+    said = ", ".join(chosen) or "no cause"
+    if aside.answer_bic >= final_bic:
+        log(f"{aside.freed} off the design, set aside: {said} has a BIC lower by {aside.answer_bic - final_bic:.1f}",
+            ctx.progress)
+        return None
+    log(f"{aside.freed} off the design, set aside for a cause: BIC lower by {final_bic - aside.answer_bic:.1f} than "
+        f"{said}{' with ' + str(final.freed) if getattr(final, 'freed', None) else ''}: the value's drift is the "
+        "answer", ctx.progress)
+    ties = [t for t in _ties(results, aside.answer_bic) if abs(t["delta_bic"]) < CAUSE_TIE_DBIC]
+    if chosen and final_bic - aside.answer_bic < CAUSE_TIE_DBIC and " + ".join(chosen) not in {t["cause"] for t in ties}:
+        ties.append({"cause": " + ".join(chosen), "delta_bic": float(final_bic - aside.answer_bic)})
+    aside.cause_ties = ties
+    return aside
 
 
 def _ties(results: dict[str, FitResult], drift_bic: float) -> list[dict[str, Any]]:
