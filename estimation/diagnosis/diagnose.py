@@ -358,6 +358,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         if results[cause].objective >= baseline.objective:
             failed.append({"cause": cause, "cost": results.pop(cause).cost,
                            "reason": "no better than the baseline refitted from its circuit values"})
+    # a cause that explained the data (no split searched for it) and is no better than the baseline refitted from its
+    # values explains nothing: the search runs now if the baseline still needs it
+    every_split()
 
     # ---- pairs: a missing section and a continuous effect fitted together, when no single cause is enough
     pool = dict(results)
@@ -432,7 +435,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         taken = _whole_answer(ctx, aside, extended or baseline, chosen, results)
         if taken is not None:
             baseline, extended, current, chosen, steps = taken, None, taken, [], []
-    on_top = relaxed_drift(ctx, extended or baseline, lambda m: log(m, progress)) if prior is not None else []
+    on_top, relaxed = relaxed_drift(ctx, extended or baseline, lambda m: log(m, progress)) if prior is not None \
+        else ([], None)
     if group_entry is not None and extended is None and len(on_top) == 1 and on_top[0]["name"] in baseline.values:
         # one value beyond the group's tolerance on top of it: the same backward step as for a value the one-value
         # search found (the value freed in the group's model, then without the group)
@@ -445,7 +449,16 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         if alone is not None:
             baseline, group_entry = alone, None
             ctx.prior = prior = prior_before
-            on_top = relaxed_drift(ctx, baseline, lambda m: log(m, progress))
+            on_top, relaxed = relaxed_drift(ctx, baseline, lambda m: log(m, progress))
+    if prior is not None and not chosen and on_top and group_entry is None and results:
+        named = _cause_over_drift(ctx, relaxed, on_top, results, baseline)
+        if named is not None:
+            extended = current = named
+            chosen = list(named.causes or [named.cause])
+            steps = [{"cause": chosen[-1], "gain": 1 - named.objective / baseline.objective,
+                      "delta_bic": baseline.bic - named.bic, "cost": named.cost, "penalty": named.penalty,
+                      "total_gain": 1 - named.objective / baseline.objective, "model": named.structure}]
+            on_top, relaxed = relaxed_drift(ctx, named, lambda m: log(m, progress))
     if (prior is not None and not chosen and not on_top and group_entry is None and ctx.drift(baseline)
             and ctx.within_design(baseline) and baseline.boxed is not None and ctx.explained(baseline.boxed)):
         baseline = baseline.boxed  # ``none``: the model returned has every value within the tolerance
@@ -466,6 +479,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
         diag.cause_alternatives = [{"cause": r.cause, "delta_bic": float(r.bic - first.bic)} for r in cands
                                    if r is not first and r.cause not in chosen and "+" not in r.cause
                                    and abs(r.bic - first.bic) < CAUSE_TIE_DBIC]
+        section_tie = section_tie + list(getattr(extended, "drift_tie", []))
         diag.cause_alternatives += [t for t in section_tie if t["cause"] not in
                                     {a["cause"] for a in diag.cause_alternatives}]
     if diag.drift:
@@ -794,6 +808,30 @@ def _whole_answer(ctx: Context, aside: FitResult, final: FitResult, chosen: list
         ties.append({"cause": " + ".join(chosen), "delta_bic": float(final_bic - aside.answer_bic)})
     aside.cause_ties = ties
     return aside
+
+
+def _cause_over_drift(ctx: Context, relaxed: FitResult, on_top: list[dict[str, Any]],
+                      results: dict[str, FitResult], baseline: FitResult) -> FitResult | None:
+    """A cause that explains the data (at the noise, no value far off) with a lower BIC than the drift the selection
+    left to be reported, both whole: the drift's model with each value reported off counted as one parameter. The
+    selection weighs a cause against the baseline under the prior, whose BIC holds the values it pulled back; the
+    values reported off are freed from the prior, and that answer is the one the cause must beat. Returns the cause's
+    fit, or None."""
+    rivals = [r for r in results.values() if ctx.explained(r)]
+    if not rivals:
+        return None
+    best = min(rivals, key=lambda r: r.bic)
+    drift_bic = relaxed.bic + len(on_top) * np.log(relaxed.n_residuals)
+    names = ", ".join(d["name"] for d in on_top)
+    if best.bic >= drift_bic:
+        log(f"{names} off the design: BIC {best.bic - drift_bic:.1f} below {best.cause}, the best cause that explains "
+            "the data", ctx.progress)
+        return None
+    log(f"{best.cause} explains the data with a BIC lower by {drift_bic - best.bic:.1f} than {names} off the design "
+        "(each counted): named", ctx.progress)
+    best.drift_tie = ([{"cause": f"drift of {names}", "delta_bic": float(drift_bic - best.bic)}]
+                      if drift_bic - best.bic < CAUSE_TIE_DBIC else [])
+    return best
 
 
 def _ties(results: dict[str, FitResult], drift_bic: float) -> list[dict[str, Any]]:

@@ -38,8 +38,10 @@ MAX_HELD = 6
 DRIFT_MIN_DBIC = 10.0
 
 
-def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> list[dict[str, Any]]:
-    """The values off the design in the final model, each freed from the prior in turn.
+def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]
+                  ) -> tuple[list[dict[str, Any]], FitResult]:
+    """The values off the design in the final model, each freed from the prior in turn, and the model they are
+    reported from (``final`` when none is).
 
     The prior pulls a value that is really off the design back towards it,
     and the others then move to make up for it. The value furthest beyond the
@@ -63,7 +65,7 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
     weigh that basin rather than the data.
     """
     if ctx.prior is None:
-        return []
+        return [], final
     drift = ctx.drift(final)
     if drift and ctx.within_design(final) and final.boxed is not None and final.boxed.bic <= final.bic:
         # a fit with every value within the tolerance (from the model, or from the design values realigned) has a
@@ -71,7 +73,7 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
         # beyond the tolerance
         log(f"beyond the tolerance, but a fit within it is {final.bic - final.boxed.bic:.1f} lower in BIC: "
             + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift) + " not reported")
-        return []
+        return [], final
     if drift:
         log("beyond the tolerance before relaxing: " + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in drift))
     current, freed = final, []
@@ -104,7 +106,7 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]) -> lis
             for d in kept:  # the values that explain the data as well, with the one they stand beside
                 if d["name"] == one.freed:
                     d["alternatives"] = one.drift_alternatives
-    return with_parallel(current.circuit, current.values, ctx.prior.design, kept)
+    return with_parallel(current.circuit, current.values, ctx.prior.design, kept), current
 
 
 def _needed(ctx: Any, current: FitResult, freed: list[str], drift: list[dict[str, Any]],
@@ -338,7 +340,10 @@ def _one_for_many(ctx: Any, current: FitResult, freed: list[str], kept: list[dic
     jobs = []
     for v in candidates:
         p = next(k for k, c in enumerate(cols) if whole.free[c] == v)
-        jobs.append((ctx, current, v, [pts[p] for pts in points]))
+        # and the one-value search's fit of that value (:func:`located_drift`), on any model: it may hold the others
+        # in the basin where that value alone explains the data
+        found = _start_from(whole, current, ctx.located[v]) if v in ctx.located else None
+        jobs.append((ctx, current, v, [pts[p] for pts in points] + ([found] if found is not None else [])))
     trials = [t for t in shared_map(_freed_onto_box, jobs) if t is not None]
     if not trials:
         return None
@@ -353,6 +358,24 @@ def _one_for_many(ctx: Any, current: FitResult, freed: list[str], kept: list[dic
     # another value that, alone, explains the data as well (the BIC within DRIFT_MIN_DBIC): the data do not tell which
     best.drift_alternatives = _alternatives(ctx, best, trials, lambda t: True, log)
     return best
+
+
+def _start_from(fit: FrequencyFit, current: FitResult, other: FitResult) -> np.ndarray | None:
+    """``other``'s values as a parameter vector of ``fit`` (built on ``current``'s fitted circuit, its values the
+    origin), or None when the two models differ in structure, effects or couplings."""
+    if ([e.label for e in other.effects] != [e.label for e in current.effects]
+            or tuple(other.couplings) != tuple(current.couplings)):
+        return None
+    x = np.zeros(fit.nc + len(fit.extra))
+    for i, n in enumerate(fit.free):
+        if fit.is_k[i]:
+            continue
+        a, b = other.values.get(n), current.values.get(n)
+        if a is None or b is None or not (a > 0 and b > 0):
+            return None
+        x[i] = np.log(a / b)
+    x[fit.nc:] = other.x[current_nc(other):]
+    return x
 
 
 def _freed_onto_box(args: tuple[Any, FitResult, str, list[np.ndarray]]) -> FitResult | None:
@@ -703,6 +726,9 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
         if trial is None:
             continue
         trials.append(trial)
+        seen = ctx.located.get(trial.freed)
+        if seen is None or trial.objective < seen.objective:
+            ctx.located[trial.freed] = trial  # a start of that value's fits within the box (:func:`_one_for_many`)
         if best is None or trial.bic < best.bic:
             best = trial
     if best is None:
