@@ -385,7 +385,10 @@ class FmuProblem:
                 "failure_reasons": {k: dict(v) for k, v in self.model.failure_reasons.items()}}
 
     def reset_stats(self) -> None:
+        """Counts from zero for a new estimate, and no run reused from the one before (a run's count does not
+        depend on what the process ran earlier)."""
         self.simulations, self.seconds = 0, 0.0
+        self._last = None
         self.model.failures = self.model.samples = 0
         self.model.failure_reasons = {}
 
