@@ -451,7 +451,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             ctx.prior = prior = prior_before
             on_top, relaxed = relaxed_drift(ctx, baseline, lambda m: log(m, progress))
     if prior is not None and not chosen and on_top and group_entry is None and results:
-        named = _cause_over_drift(ctx, relaxed, on_top, results, baseline)
+        named = _cause_over_drift(ctx, relaxed, on_top, results)
         if named is not None:
             extended = current = named
             chosen = list(named.causes or [named.cause])
@@ -811,7 +811,7 @@ def _whole_answer(ctx: Context, aside: FitResult, final: FitResult, chosen: list
 
 
 def _cause_over_drift(ctx: Context, relaxed: FitResult, on_top: list[dict[str, Any]],
-                      results: dict[str, FitResult], baseline: FitResult) -> FitResult | None:
+                      results: dict[str, FitResult]) -> FitResult | None:
     """A cause that explains the data (at the noise, no value far off) with a lower BIC than the drift the selection
     left to be reported, both whole: the drift's model with each value reported off counted as one parameter. The
     selection weighs a cause against the baseline under the prior, whose BIC holds the values it pulled back; the
