@@ -70,9 +70,9 @@ class Context:
     #: One value off the design set aside for a cause with a lower BIC, weighed again against the final answer
     #: (:func:`.diagnose._whole_answer`); ``answer_bic`` set on it.
     drift_aside: FitResult | None = None
-    #: The best fit of each value the one-value search freed (:func:`.drift.located_drift`), by name: a start of that
-    #: value's later fits.
-    located: dict[str, FitResult] = field(default_factory=dict)
+    #: The best fit of each value the one-value search freed (:func:`.drift.located_drift`), by name, as a start of
+    #: that value's later fits: (objective, effect labels, couplings, values, effect parameters).
+    located: dict[str, tuple] = field(default_factory=dict)
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
             prior: DesignPrior | None | str = "same", couplings: Sequence[str] = ()) -> FrequencyFit:

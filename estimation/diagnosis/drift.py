@@ -360,21 +360,22 @@ def _one_for_many(ctx: Any, current: FitResult, freed: list[str], kept: list[dic
     return best
 
 
-def _start_from(fit: FrequencyFit, current: FitResult, other: FitResult) -> np.ndarray | None:
-    """``other``'s values as a parameter vector of ``fit`` (built on ``current``'s fitted circuit, its values the
-    origin), or None when the two models differ in structure, effects or couplings."""
-    if ([e.label for e in other.effects] != [e.label for e in current.effects]
-            or tuple(other.couplings) != tuple(current.couplings)):
+def _start_from(fit: FrequencyFit, current: FitResult, other: tuple) -> np.ndarray | None:
+    """A fit kept by :func:`located_drift` (``ctx.located``: objective, effect labels, couplings, values, effect
+    parameters) as a parameter vector of ``fit`` (built on ``current``'s fitted circuit, its values the origin), or
+    None when the two models differ in structure, effects or couplings."""
+    _, labels, couplings, values, tail = other
+    if labels != [e.label for e in current.effects] or couplings != tuple(current.couplings):
         return None
     x = np.zeros(fit.nc + len(fit.extra))
     for i, n in enumerate(fit.free):
         if fit.is_k[i]:
             continue
-        a, b = other.values.get(n), current.values.get(n)
+        a, b = values.get(n), current.values.get(n)
         if a is None or b is None or not (a > 0 and b > 0):
             return None
         x[i] = np.log(a / b)
-    x[fit.nc:] = other.x[current_nc(other):]
+    x[fit.nc:] = tail
     return x
 
 
@@ -727,8 +728,11 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
             continue
         trials.append(trial)
         seen = ctx.located.get(trial.freed)
-        if seen is None or trial.objective < seen.objective:
-            ctx.located[trial.freed] = trial  # a start of that value's fits within the box (:func:`_one_for_many`)
+        if seen is None or trial.objective < seen[0]:
+            # a start of that value's fits within the box (:func:`_one_for_many`): what :func:`_start_from` needs, not
+            # the whole fit (the context goes to every parallel job)
+            ctx.located[trial.freed] = (trial.objective, [e.label for e in trial.effects], tuple(trial.couplings),
+                                        dict(trial.values), trial.x[current_nc(trial):].copy())
         if best is None or trial.bic < best.bic:
             best = trial
     if best is None:
