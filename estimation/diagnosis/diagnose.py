@@ -459,6 +459,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                       "delta_bic": baseline.bic - named.bic, "cost": named.cost, "penalty": named.penalty,
                       "total_gain": 1 - named.objective / baseline.objective, "model": named.structure}]
             on_top, relaxed = relaxed_drift(ctx, named, lambda m: log(m, progress))
+        elif getattr(relaxed, "cause_tie", None):  # a cause barely told from the drift: reported beside it
+            baseline.cause_ties = list(getattr(baseline, "cause_ties", [])) + relaxed.cause_tie
     if (prior is not None and not chosen and not on_top and group_entry is None and ctx.drift(baseline)
             and ctx.within_design(baseline) and baseline.boxed is not None and ctx.explained(baseline.boxed)):
         baseline = baseline.boxed  # ``none``: the model returned has every value within the tolerance
@@ -815,17 +817,23 @@ def _cause_over_drift(ctx: Context, relaxed: FitResult, on_top: list[dict[str, A
     """A cause that explains the data (at the noise, no value far off) with a lower BIC than the drift the selection
     left to be reported, both whole: the drift's model with each value reported off counted as one parameter. The
     selection weighs a cause against the baseline under the prior, whose BIC holds the values it pulled back; the
-    values reported off are freed from the prior, and that answer is the one the cause must beat. Returns the cause's
-    fit, or None."""
+    values reported off are freed from the prior, and that answer is the one the cause must beat. Both are weighed
+    converged: the drift's model is (:func:`.drift.relaxed_drift`), and the cause is refitted from its own values
+    (:func:`.converge.converged`, a new section too: no selection goes on from it). Returns the cause's fit (it
+    replaces the cause's entry in ``results``), or None; a drift lower by less than ``CAUSE_TIE_DBIC`` gets the cause
+    in ``relaxed.cause_tie``."""
     rivals = [r for r in results.values() if ctx.explained(r)]
     if not rivals:
         return None
     best = min(rivals, key=lambda r: r.bic)
+    best = results[best.cause] = converged(ctx, best, lambda m: log(m, ctx.progress), structure=True)
     drift_bic = relaxed.bic + len(on_top) * np.log(relaxed.n_residuals)
     names = ", ".join(d["name"] for d in on_top)
     if best.bic >= drift_bic:
         log(f"{names} off the design: BIC {best.bic - drift_bic:.1f} below {best.cause}, the best cause that explains "
             "the data", ctx.progress)
+        if best.bic - drift_bic < CAUSE_TIE_DBIC:
+            relaxed.cause_tie = [{"cause": best.cause, "delta_bic": float(best.bic - drift_bic)}]
         return None
     log(f"{best.cause} explains the data with a BIC lower by {drift_bic - best.bic:.1f} than {names} off the design "
         "(each counted): named", ctx.progress)
