@@ -860,9 +860,13 @@ def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResu
     """A drift answer (its fit and BIC with the drift's parameters counted) that the structures must be weighed
     against at their best: its model does not explain the data (above the noise, or a value besides the drift's own
     more than ``GROSS_DRIFT`` tolerances off: the group's under its ``prior``, the freed value not counted), or a
-    new section's fit (a local optimum of a search that is not complete) comes within ``DRIFT_MIN_DBIC`` ("very
-    strong") of it."""
+    new section's fit (a local optimum of a search that is not complete), refitted to convergence first (it replaces
+    its entry in ``results``), comes within ``DRIFT_MIN_DBIC`` ("very strong") of it."""
     section = results.get("missing-section")
+    if section is not None and not getattr(section, "converged", False):
+        # weighed at its own convergence, as the drift's fit is: a split's first fit stops after tens of evaluations
+        section = results["missing-section"] = converged(ctx, section, lambda m: log(m, ctx.progress), structure=True)
+        section.converged = True
     if section is not None and section.bic - bic < DRIFT_MIN_DBIC:
         return True
     freed = str(getattr(drift, "freed", "")).lower()
