@@ -73,7 +73,7 @@ def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: Non
     return res
 
 
-def converged_job(args: tuple[Any, FitResult]) -> FitResult:
-    """``(ctx, r)`` to :func:`converged` ``(ctx, r)``: one job of a batch shared with the helper process."""
-    ctx, r = args
-    return converged(ctx, r)
+def converged_job(args: tuple[Any, FitResult] | tuple[Any, FitResult, bool]) -> FitResult:
+    """``(ctx, r)`` or ``(ctx, r, structure)`` to :func:`converged`: one job of a batch shared with the helper
+    process."""
+    return converged(args[0], args[1], structure=bool(args[2]) if len(args) > 2 else False)

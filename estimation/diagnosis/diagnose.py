@@ -818,15 +818,19 @@ def _cause_over_drift(ctx: Context, relaxed: FitResult, on_top: list[dict[str, A
     left to be reported, both whole: the drift's model with each value reported off counted as one parameter. The
     selection weighs a cause against the baseline under the prior, whose BIC holds the values it pulled back; the
     values reported off are freed from the prior, and that answer is the one the cause must beat. Both are weighed
-    converged: the drift's model is (:func:`.drift.relaxed_drift`), and the cause is refitted from its own values
-    (:func:`.converge.converged`, a new section too: no selection goes on from it). Returns the cause's fit (it
-    replaces the cause's entry in ``results``), or None; a drift lower by less than ``CAUSE_TIE_DBIC`` gets the cause
-    in ``relaxed.cause_tie``."""
+    converged: the drift's model is (:func:`.drift.relaxed_drift`), and every cause is refitted from its own values
+    (:func:`.converge.converged`, a new section too: no selection goes on from it) before the ones that explain the
+    data are sought among them. Returns the cause's fit (the refits replace the causes' entries in ``results``), or
+    None; a drift lower by less than ``CAUSE_TIE_DBIC`` gets the cause in ``relaxed.cause_tie``."""
+    keys = list(results)
+    for c, r in zip(keys, shared_map(converged_job, [(ctx, results[c], True) for c in keys])):
+        if r is not results[c]:
+            log(f"  {c} refitted to convergence: {results[c].objective:.4g} -> {r.objective:.4g}", ctx.progress)
+            results[c] = r
     rivals = [r for r in results.values() if ctx.explained(r)]
     if not rivals:
         return None
     best = min(rivals, key=lambda r: r.bic)
-    best = results[best.cause] = converged(ctx, best, lambda m: log(m, ctx.progress), structure=True)
     drift_bic = relaxed.bic + len(on_top) * np.log(relaxed.n_residuals)
     names = ", ".join(d["name"] for d in on_top)
     if best.bic >= drift_bic:
