@@ -38,15 +38,14 @@ def test_missing_section_named_against_the_design():
     the section is weighed against those values freed, both converged."""
     case, d = _diagnose(("missing-section",), 700)
     assert case.truth["sections"] == 7
-    # the values the baseline moved (C2 x0.3, C6 x2.5, Cg2 x1.5) freed from the prior fit as well as the split does,
-    # converged both: the data tell them apart by less than a BIC of one, on either side of it by the floating-point
-    # path (the BLAS kernel): the answer is either, with the other reported beside it as a tie
+    # the values the baseline moved (C2 x0.3, C6 x2.5, Cg2 x1.5) freed from the prior fit about as well as the split
+    # does, converged both: where the data tell them apart by less than a tie (by the floating-point path, the BLAS
+    # kernel), the answer may be that drift, with the section reported beside it
     if d.causes != ["missing-section"]:
         assert d.causes == [] and d.drift, d.steps
         assert any(a["cause"] == "missing-section" and a["delta_bic"] < CAUSE_TIE_DBIC
                    for a in d.cause_alternatives), d.cause_alternatives
         return
-    assert any(a["cause"].startswith("drift of") for a in d.cause_alternatives), d.cause_alternatives
     assert d.drift == [], d.drift
     # the baseline reaches the noise only with values beyond the tolerance: the section brings it there within it
     assert d.baseline_drift, "the baseline alone needs values far from the design"
