@@ -14,7 +14,11 @@ several times more. So is a model with a new section: whether it is at the
 noise with values off the design turns on its residuals' whiteness
 (:meth:`.context.Context.settled`), and refitted further a split that had
 taken a skin effect's share into its values passed that test and stopped
-there (design missing section + skin effect 702).
+there (design missing section + skin effect 702). Weighed against a drift,
+a new section alone is refitted all the same: the drift's own fit is
+converged, and a split's first fit stopped 19 in BIC short of its
+convergence on design missing section 700
+(:func:`.diagnose._open`, :func:`.diagnose._cause_over_drift`).
 """
 
 from __future__ import annotations
@@ -47,7 +51,8 @@ def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: Non
         Receives one progress line when the refit lowers the objective.
     structure : bool
         Refit a model with a new section too (the reference an extension's gain is measured against,
-        :func:`.causes.extend.extensions`; not the model the selection goes on from, see above).
+        :func:`.causes.extend.extensions`, and a section weighed against a drift; not the model the selection goes
+        on from after a cause is named, see above).
 
     Returns
     -------
