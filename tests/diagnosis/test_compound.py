@@ -56,11 +56,13 @@ def test_missing_section_named_against_the_design():
 @pytest.mark.slow
 @pytest.mark.long
 def test_missing_section_found_when_the_design_stays_far_above_the_noise():
-    """Two merged sections at the port; the design fits no better than 250x the noise. The split is found only by
-    fitting its seeds through errors smoothed from a decade down (the seeds' resonances are tens of per cent off)."""
+    """Two merged sections at the port; the design's first fit is about 300x the noise (refitted from the series
+    capacitances' group fit, 1.35x with values far off the design). The split is found only by fitting its seeds
+    through errors smoothed from a decade down (the seeds' resonances are tens of per cent off)."""
     case, d = _diagnose(("missing-section",), 702)
     assert case.truth["merged_sections"] == (1, 2)
-    assert d.baseline.cost > 100 * d.noise["cost"]
+    assert d.baseline_drift, "the baseline needs values far from the design"
+    assert d.gain > 0.3
     assert d.causes == ["missing-section"], d.steps
     assert "section 1 " in d.best.structure, d.best.structure
     assert d.best.cost <= 1.25 * d.noise["cost"]

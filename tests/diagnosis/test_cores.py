@@ -130,7 +130,7 @@ import hidden_cases as hc
 from estimation.diagnosis import diagnose_frequency
 from pris_cosim.circuits.netlist import parse_netlist
 
-case = hc.one_port_case(("skin-effect",), 7, sections=5)
+case = hc.one_port_case(("skin-effect",), 7, sections=3)
 d = diagnose_frequency(case.frequency_hz, case.measured, circuit=parse_netlist(case.baseline_netlist), port="n1",
                        progress=False)
 final = d.best or d.baseline
@@ -142,7 +142,7 @@ print(json.dumps({{"causes": d.causes, "cost": final.cost, "baseline": d.baselin
 @pytest.mark.slow
 @needs_helper
 def test_a_diagnosis_is_the_same_with_and_without_the_helper(tmp_path):
-    """The independent generator's one-port skin-effect case, diagnosed in two fresh processes."""
+    """The independent generator's one-port skin-effect case (three sections), diagnosed in two fresh processes."""
     script = tmp_path / "diagnose_case.py"
     script.write_text(_DIAGNOSE.format(tests=str(ROOT / "tests"), root=str(ROOT)))
     runs = {}
