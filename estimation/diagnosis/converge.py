@@ -58,9 +58,10 @@ def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: Non
     -------
     FitResult
         The refit when its objective (cost plus design penalty, dimensionless) is lower, else ``r``; the
-        refit keeps ``r``'s structure, causes and provenance.
+        refit keeps ``r``'s structure, causes and provenance. Either is marked ``converged`` and not refitted
+        again.
     """
-    if not ctx.one_port or (r.structure and not structure):
+    if getattr(r, "converged", False) or not ctx.one_port or (r.structure and not structure):
         return r
     try:
         fit = ctx.fit(r.fitted_circuit(), r.effects, couplings=r.couplings)
@@ -69,7 +70,9 @@ def converged(ctx: Any, r: FitResult, log: Callable[[str], None] = lambda m: Non
     except CANDIDATE_FAILURES:
         return r
     if res.objective >= r.objective:
+        r.converged = True
         return r
+    res.converged = True
     res.structure, res.causes, res.cause = r.structure, list(r.causes), r.cause
     for name in _PROVENANCE:
         if hasattr(r, name):

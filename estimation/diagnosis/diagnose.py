@@ -867,10 +867,9 @@ def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResu
     new section's fit (a local optimum of a search that is not complete), refitted to convergence first (it replaces
     its entry in ``results``), comes within ``DRIFT_MIN_DBIC`` ("very strong") of it."""
     section = results.get("missing-section")
-    if section is not None and not getattr(section, "converged", False):
+    if section is not None:
         # weighed at its own convergence, as the drift's fit is: a split's first fit stops after tens of evaluations
         section = results["missing-section"] = converged(ctx, section, lambda m: log(m, ctx.progress), structure=True)
-        section.converged = True
     if section is not None and section.bic - bic < DRIFT_MIN_DBIC:
         return True
     freed = str(getattr(drift, "freed", "")).lower()
