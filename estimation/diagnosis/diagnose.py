@@ -727,10 +727,10 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     :func:`.drift.located_drift`) is weighed the same way, the freed value one parameter; below them all it is the
     answer (drift, no cause), and no structure is sought for what it explains. ``failed`` gets the causes so set aside.
 
-    A drift is taken as the answer on the best fit of every rival: the new section's fit is refitted to convergence
-    and ``structures`` (the search of every section split, which adds its best to ``results``; it runs when no
-    cause explains the data within the design) runs first. A drift of a value 1.4x its design explains the data as
-    a section split can (a split of section 2 of 8 answered as C1 x1.38 at the noise, the split search not run).
+    A drift is taken as the answer on the best fit of every rival: when it is open (its model does not explain
+    the data, or a new section's fit comes within ``DRIFT_MIN_DBIC`` of it), ``structures`` (the search of every
+    section split, which adds its best to ``results``; it runs when no cause explains the data within the design)
+    runs first and the drift is weighed again.
 
     Returns
     -------
@@ -751,8 +751,8 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
             group = None
     if group is not None:
         g_bic = group[0].bic + np.log(group[0].n_residuals)
-        _section_converged(ctx, results)
-        structures()
+        if _open(ctx, group[0], g_bic, results, group[1]):
+            structures()
         rival = min(results.values(), key=lambda r: r.bic) if results else None
         if rival is None or g_bic < rival.bic:
             log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: BIC below every single cause's"
@@ -772,8 +772,8 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     if one is None:
         return baseline, None, False, baseline
     o_bic = one.bic + np.log(one.n_residuals)
-    _section_converged(ctx, results)
-    structures()
+    if _open(ctx, one, o_bic, results):
+        structures()
     rival = min(results.values(), key=lambda r: r.bic)
     if o_bic < rival.bic:
         log(f"{one.freed} off the design: BIC below every single cause's ({rival.cause}: "
@@ -861,13 +861,22 @@ def _ties(results: dict[str, FitResult], drift_bic: float) -> list[dict[str, Any
 HELD_OUT_SE = 2.0
 
 
-def _section_converged(ctx: Context, results: dict[str, FitResult]) -> None:
-    """The new section's fit in ``results`` refitted to convergence (it replaces its entry): weighed against a drift,
-    whose fit is converged, a split's first fit stops after tens of evaluations (19 in BIC short of its convergence on
-    design missing section 700)."""
+def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResult],
+          prior: DesignPrior | None = None) -> bool:
+    """A drift answer (its fit and BIC with the drift's parameters counted) that the structures must be weighed
+    against at their best: its model does not explain the data (above the noise, or a value besides the drift's own
+    more than ``GROSS_DRIFT`` tolerances off: the group's under its ``prior``, the freed value not counted), or a
+    new section's fit (a local optimum of a search that is not complete), refitted to convergence first (it replaces
+    its entry in ``results``), comes within ``DRIFT_MIN_DBIC`` ("very strong") of it."""
     section = results.get("missing-section")
     if section is not None:
-        results["missing-section"] = converged(ctx, section, lambda m: log(m, ctx.progress), structure=True)
+        # weighed at its own convergence, as the drift's fit is: a split's first fit stops after tens of evaluations
+        section = results["missing-section"] = converged(ctx, section, lambda m: log(m, ctx.progress), structure=True)
+    if section is not None and section.bic - bic < DRIFT_MIN_DBIC:
+        return True
+    freed = str(getattr(drift, "freed", "")).lower()
+    others = [d for d in ctx.gross(drift, prior) if d["name"].lower() != freed]
+    return drift.objective > NOISE_MARGIN * ctx.floor or bool(others)
 
 
 def _explained_within_design(ctx: Context, results: dict[str, FitResult]) -> bool:
@@ -876,7 +885,9 @@ def _explained_within_design(ctx: Context, results: dict[str, FitResult]) -> boo
     (:meth:`.context.Context.within_design`): the data are explained within the design, and no structure is sought.
 
     A baseline at the noise whose values the data reject at the tolerance's edge leaves every cause at the noise
-    too, each by the same values beyond it: such a cause explains nothing the baseline does not."""
+    too, each by the same values beyond it: such a cause explains nothing the baseline does not (a split of section 1
+    of 8 answered as C1 x1.38: every cause "at the noise", the box rejected by 335 in BIC, the split search not
+    run)."""
     fits = [r for r in results.values() if ctx.explained(r)]
     return bool(fits) and ctx.within_design(min(fits, key=lambda r: r.bic))
 
