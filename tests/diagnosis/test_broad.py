@@ -184,19 +184,6 @@ def test_a_value_off_alone_found_from_the_design_values_aligned(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.long
-def test_a_split_the_baseline_fits_at_the_noise_with_one_value_moved_is_not_that_value(tmp_path):
-    """Draw 1185 of the benchmark's fixed seeds (eight sections, 747 points, 0.83 % noise): section 1 is two
-    sections. The baseline reaches the noise with C1 at 1.34x (not two tolerances off), and the data reject the
-    tolerance box by hundreds in BIC; every cause is at the noise only as the baseline is, and C1 alone off the
-    design explains the data. Every section split is weighed against that drift, and a split fits below it."""
-    case = draw(1185)
-    assert case.effect == "split" and case.extra["split"] == 1
-    d = _diagnose(case, tmp_path)
-    assert d.causes == ["missing-section"]
-
-
-@pytest.mark.slow
-@pytest.mark.long
 def test_a_split_found_from_the_design_values_when_its_seeds_are_aligned(tmp_path):
     """Draw 1117 of the benchmark's fixed seeds (eight sections, 0.17 % noise): section 1 is two sections. The
     baseline reaches the noise only with 13 values beyond the tolerance; the respaced split of the design's section
@@ -262,13 +249,14 @@ def test_values_that_pass_for_each_other_are_not_a_finding_of_none(tmp_path):
     """Draw 1185 of the benchmark's fixed seeds (eight sections, 747 points, 0.83 % noise): section 1 is two
     sections. The baseline reaches the noise floor with the series capacitance and the resistance of section 1
     beyond the tolerance, and each, held at its edge, passes while the other makes up for it. With every value
-    followed onto its tolerance box the data reject the fit by hundreds in BIC against the two freed: the answer is
-    not ``none`` with nothing reported. Either the split is named or section 1's capacitance is reported off."""
+    followed onto its tolerance box the data reject the fit by hundreds in BIC against the two freed: something
+    the design lacks is at work. Every cause is at the noise only as the baseline is, so none explains the data
+    within the design, and every section split is searched (C1 alone at 1.38x explains the data at the noise too):
+    a split fits 8 % below the baseline, and the missing section is named."""
     case = draw(1185)
     assert case.effect == "split" and case.extra["split"] == 1
     d = _diagnose(case, tmp_path)
-    assert d.causes == ["missing-section"] or (not d.causes and "C1" in {x["name"] for x in d.drift}), (
-        d.cause, d.candidates(), d.drift)
+    assert d.causes == ["missing-section"], (d.cause, d.candidates(), d.drift)
 
 
 @pytest.mark.slow
@@ -291,6 +279,7 @@ def test_none_comes_with_every_value_within_the_tolerance(seed, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_weak_mode_is_aligned_and_the_fit_reaches_the_truths_level(tmp_path):
     """Draw 1174 of the benchmark's fixed seeds (seven sections, Cg5 x1.95, 964 points, 1.1 % noise) has a mode
     weakly observable at the port: a pole and a zero at 196.9 kHz, a wiggle of under 1 dB over two points. A model
