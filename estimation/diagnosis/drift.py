@@ -188,13 +188,21 @@ def _design_boxed(ctx: Any, model: FitResult) -> FitResult | None:
     """
     try:
         fit = ctx.fit(model.fitted_circuit(), model.effects, couplings=model.couplings)
-        x = fit.design_vector(np.concatenate([np.zeros(fit.nc), model.x[current_nc(model):]]))
-        aligned = aligned_start(fit, x)
-        boxed = within_box(fit, x if aligned is None else aligned, ctx.prior.tau, max_nfev=200)
-        moved = realigned(fit, boxed, ctx.floor, 0.0)
+        boxed, moved = _aligned_boxed(ctx, fit, fit.design_vector(
+            np.concatenate([np.zeros(fit.nc), model.x[current_nc(model):]])))
     except CANDIDATE_FAILURES:
         return None
     return moved if moved is not boxed and not ctx.drift(moved) else boxed
+
+
+def _aligned_boxed(ctx: Any, fit: FrequencyFit, x: np.ndarray, free: Sequence[int] = (), good_enough: float = 0.0
+                   ) -> tuple[FitResult, FitResult]:
+    """``fit`` within the tolerance box from ``x`` with the resonances aligned (:func:`.align.aligned_start`; the
+    columns ``free`` not pulled back), and that fit realigned onto its misfits (:func:`.realign.realigned`, which
+    stops at the objective ``good_enough``; the fit itself when no move lowers it). A failed solve raises."""
+    aligned = aligned_start(fit, x, free=free)
+    boxed = within_box(fit, x if aligned is None else aligned, ctx.prior.tau, max_nfev=200)
+    return boxed, realigned(fit, boxed, ctx.floor, good_enough)
 
 
 def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept: list[dict[str, Any]],
@@ -430,24 +438,17 @@ def _aligned_in_box(ctx: Any, current: FitResult, name: str) -> FitResult | None
         fit = ctx.fit(current.fitted_circuit(), current.effects, prior=loose, couplings=current.couplings)
         origin = np.concatenate([np.zeros(fit.nc), current.x[current_nc(current):]])
         column = fit.free.index(name)
-        out = _aligned_fit(ctx, fit, origin, column)
+        x = fit.design_vector(origin)
+        x[column] = origin[column]
+        out, moved = _aligned_boxed(ctx, fit, x, free=[column], good_enough=ctx.floor)
+        if moved is not out:
+            # the realignment's fits are not bounded: back within the box
+            moved = within_box(fit, moved.x, ctx.prior.tau, max_nfev=200)
+            out = moved if moved.objective < out.objective else out
     except CANDIDATE_FAILURES:
         return None
     out.freed = name
     return out
-
-
-def _aligned_fit(ctx: Any, fit: FrequencyFit, origin: np.ndarray, column: int) -> FitResult:
-    """The fit of :func:`_aligned_in_box` (``fit`` with the freed value's ``column``, from ``origin``)."""
-    x = fit.design_vector(origin)
-    x[column] = origin[column]
-    aligned = aligned_start(fit, x, free=[column])
-    boxed = within_box(fit, x if aligned is None else aligned, ctx.prior.tau, max_nfev=200)
-    moved = realigned(fit, boxed, ctx.floor, ctx.floor)
-    if moved is boxed:
-        return boxed
-    moved = within_box(fit, moved.x, ctx.prior.tau, max_nfev=200)
-    return moved if moved.objective < boxed.objective else boxed
 
 
 def _fewest_needed(ctx: Any, current: FitResult, freed: list[str], kept: list[dict[str, Any]],
