@@ -50,6 +50,7 @@ from estimation import approaches as ap
 from estimation.search.optimisers import Budget, minimize
 from estimation.parameters import ParameterSet
 from estimation.recipe import End, Outcome, Start, run_recipe
+from estimation.resonances import refine_resonances
 
 #: Ties assumed when a config names neither parameters nor ties: the thesis's estimation vectors
 #: (two-section 4.1.3: R2 = R1, C2 = C1) and, for the 4-section cascade, the uniform winding of the
@@ -324,58 +325,6 @@ def resonance_proxy(approach: ap.Approach, params: ParameterSet, circuit: Any, c
     engine = SimpleNamespace(circuit=shorted, mna=MNA(shorted, current_inputs=[configuration.port]))
     guide = modal.ModalGuide(params, engine, peaks, np.ones_like(peaks), damping_weight=0.0)  # type: ignore[arg-type]
     return modal.ResonanceProxy(approach, guide, PEAK_WEIGHT)
-
-
-def refine_resonances(f: np.ndarray, z: np.ndarray, peaks: np.ndarray) -> np.ndarray:
-    """Resonance frequencies (Hz) of an impedance, sharper than its sampling: peaks moved to fitted poles.
-
-    A resonance far sharper than the frequency grid peaks between two samples;
-    its sampled peak is off by up to half a step (a few percent on 200 points
-    per band). A rational fit of the whole impedance (vector fitting,
-    scikit-rf's :class:`skrf.vectorFitting.VectorFitting`, Gustavsen and
-    Semlyen 1999; two real and ``2 len(peaks) + 4`` complex pole pairs) places
-    the poles far more precisely. Each peak moves to the nearest fitted pole
-    when that pole lies within one grid step of it; a peak with no such pole
-    is dropped when others have one (a shoulder, or a peak off its pole by
-    more than a step), and a failed fit changes nothing.
-
-    Parameters
-    ----------
-    f : numpy.ndarray, Hz
-        ``(F,)`` increasing frequencies of the samples.
-    z : numpy.ndarray, Ohm
-        ``(F,)`` complex impedance.
-    peaks : numpy.ndarray, Hz
-        Peak frequencies of ``|z|`` on the samples.
-    """
-    import warnings
-
-    import skrf
-    from skrf.vectorFitting import VectorFitting
-
-    peaks = np.asarray(peaks, float)
-    step = float(np.median(np.diff(np.log(f)))) if f.size > 1 else 0.0
-    try:
-        nw = skrf.Network(frequency=skrf.Frequency.from_f(f, unit="hz"), z=np.asarray(z).reshape(-1, 1, 1), z0=50.0)
-        vf = VectorFitting(nw)
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore")
-            vf.vector_fit(n_poles_real=2, n_poles_cmplx=2 * int(peaks.size) + 4, parameter_type="z",
-                          init_pole_spacing="log")
-        p = np.asarray(vf.poles)
-    except Exception:  # noqa: BLE001 - the fit is a refinement only
-        return peaks
-    fp = p.imag[(p.imag > 0) & (p.real < 0)] / (2 * np.pi)
-    if not fp.size:
-        return peaks
-    out, refined = peaks.copy(), np.zeros(peaks.size, bool)
-    for i, pk in enumerate(peaks):
-        d = np.abs(np.log(fp / pk))
-        j = int(np.argmin(d))
-        if d[j] <= step:
-            out[i], refined[i] = fp[j], True
-    # where the fit found some resonances, a peak it does not confirm is a shoulder or lies off its pole
-    return out[refined] if refined.any() else out
 
 
 def waveform_specs(configuration: Any, channels: Mapping[str, np.ndarray]) -> list[ap.ResponseSpec]:
