@@ -159,9 +159,11 @@ def refine_resonances(f: np.ndarray, z: np.ndarray, peaks: np.ndarray) -> np.nda
     its sampled peak is off by up to half a step (a few percent on 200 points
     per band). A rational fit of the whole impedance (vector fitting,
     scikit-rf's :class:`skrf.vectorFitting.VectorFitting`, Gustavsen and
-    Semlyen 1999; two real and ``2 len(peaks) + 4`` complex pole pairs) places
-    the poles far more precisely. Each peak moves to the nearest fitted pole
-    when that pole lies within one grid step of it; a peak with no such pole
+    Semlyen 1999; two real and ``2 len(peaks) + 4`` complex pole pairs, with a
+    term proportional to ``s`` for a response that rises as an inductance's or
+    a capacitance's admittance does) places
+    the poles far more precisely. Each peak moves to the highest fitted pole
+    (``|residue / Re(pole)|``, its peak on its own) within one grid step of it; a peak with no such pole
     is dropped when others have one (a shoulder, or a peak off its pole by
     more than a step), and a failed fit changes nothing.
 
@@ -187,18 +189,22 @@ def refine_resonances(f: np.ndarray, z: np.ndarray, peaks: np.ndarray) -> np.nda
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
             vf.vector_fit(n_poles_real=2, n_poles_cmplx=2 * int(peaks.size) + 4, parameter_type="z",
-                          init_pole_spacing="log")
+                          init_pole_spacing="log", fit_proportional=True)
         p = np.asarray(vf.poles)
+        r = np.abs(np.asarray(vf.residues)).reshape(-1, p.size).max(axis=0)
     except Exception:  # noqa: BLE001 - the fit is a refinement only
         return peaks
-    fp = p.imag[(p.imag > 0) & (p.real < 0)] / (2 * np.pi)
+    keep = (p.imag > 0) & (p.real < 0)
+    fp = p.imag[keep] / (2 * np.pi)
+    # each pole's height at its own frequency, |residue / Re(pole)|: a spare pole of the fit sits anywhere with a
+    # residue near zero (a pole-zero doublet), the resonance's pole makes the peak
+    height = r[keep] / np.abs(p.real[keep])
     if not fp.size:
         return peaks
     out, refined = peaks.copy(), np.zeros(peaks.size, bool)
     for i, pk in enumerate(peaks):
-        d = np.abs(np.log(fp / pk))
-        j = int(np.argmin(d))
-        if d[j] <= step:
-            out[i], refined[i] = fp[j], True
+        near = np.flatnonzero(np.abs(np.log(fp / pk)) <= step)
+        if near.size:
+            out[i], refined[i] = fp[near[np.argmax(height[near])]], True
     # where the fit found some resonances, a peak it does not confirm is a shoulder or lies off its pole
     return out[refined] if refined.any() else out

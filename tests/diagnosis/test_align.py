@@ -114,3 +114,49 @@ def test_noise_on_a_smooth_response_makes_no_measured_resonance():
         extra += peaks.size + dips.size - 2  # the tank's peak and the dip where the series inductance takes over
     # peaks and dips each at most MODE_ALPHA per record: about 0.4 expected in 200 records
     assert MODE_ALPHA <= 1e-3 and extra <= 3
+
+
+def test_refined_modes_place_sharp_resonances_between_the_samples():
+    from estimation.diagnosis.align import measured_modes, refined_modes
+
+    # R 0.5 Ohm: quality factors near 1400 and 1000, half-power bands 0.04-0.05 % wide, and the samples 1.7 % apart
+    f = np.logspace(4, 7, 400)
+    rng = np.random.default_rng(5)
+    l, c1, c2, r = L, C1, C2, 0.5
+    s = 2j * np.pi * f
+    z = 1 / (1 / (r + s * l + 1 / (s * c2)) + s * c1)
+    z = _noisy(z, 0.005, rng)
+    series = _roots_hz([l * c2, r * c2, 1.0])
+    parallel = _roots_hz([l * c1 * c2, r * c1 * c2, c1 + c2])
+    peaks, dips = measured_modes(f, z)
+    fine_peaks, fine_dips = refined_modes(f, z)
+    assert fine_peaks.size == 1 and fine_dips.size == 1
+    # sampled: off by a fraction of the step (here 0.1-0.8 %); refined: within 1e-4
+    assert abs(peaks[0] / parallel - 1) > 1e-3 or abs(dips[0] / series - 1) > 1e-3
+    assert fine_peaks[0] == pytest.approx(parallel, rel=1e-4)
+    assert fine_dips[0] == pytest.approx(series, rel=1e-4)
+
+
+def test_alignment_within_the_box_keeps_the_held_values_in_it():
+    from estimation.diagnosis.prior import DesignPrior
+
+    f = np.logspace(4, 7, 400)
+    z = _closed_form(f, L, C1, C2)
+    net = parse_netlist(_net(L, 0.94 * C1, 1.06 * C2))
+    cfg = [Configuration("default", "p", (), (Response("Zin"),))]
+    # the design: L 30 % high; C1 and C2 within 6 %. Only L moves both resonances back by its own ratio
+    design = {"r1": R, "l1": 1.3 * L, "c1": 0.94 * C1, "c2": 1.06 * C2}
+    prior = DesignPrior(design, 0.1, 1e-4)
+    fit = FrequencyFit(net, cfg, f, {"Zin": z}, prior=prior)
+    x0 = fit.design_vector(np.zeros(fit.nc))
+    tau = prior.tau
+    x = aligned_start(fit, x0, box=tau, max_nfev=200)
+    assert x is not None
+    held = fit.anchored_columns
+    assert np.all(np.abs(x[held] - x0[held]) <= tau + 1e-9)
+    # freed from the box, L returns to the truth and both resonances fall on the closed form's
+    column = fit.free.index("L1")
+    x = aligned_start(fit, x0, free=[column], box=tau, max_nfev=200)
+    p, zz = port_modes(fit, x, 0, f[0], f[-1])
+    assert zz[0] == pytest.approx(_roots_hz([L * C2, R * C2, 1.0]), rel=2e-3)
+    assert p[0] == pytest.approx(_roots_hz([L * C1 * C2, R * C1 * C2, C1 + C2]), rel=2e-3)
