@@ -33,7 +33,7 @@ from estimation.resonances import find_resonances, refine_resonances
 PULL = 0.01
 #: The pull within the tolerance box (:func:`aligned_start` with ``box``): a value moved by one tolerance weighs like
 #: a resonance 0.1 % off. The measured resonances are placed to about 1e-5 (:func:`refined_modes`) and a mode of
-#: quality factor 1000 is 0.05 % wide, so an alignment that leaves the modes 1 % off (:data:`PULL`) leaves each many
+#: quality factor 1000 is 0.1 % wide, so an alignment that leaves the modes 1 % off (:data:`PULL`) leaves each many
 #: bandwidths from its measured place; within the box the bounds keep the values near the design.
 BOXED_PULL = 1e-3
 #: Residual of a measured resonance that no model resonance is paired with (not differentiable: a constant).
@@ -133,9 +133,9 @@ def refined_modes(f: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     """:func:`measured_modes`, each peak moved onto a pole and each dip onto a zero of a rational fit of ``h``.
 
     A winding's resonances are far sharper than a logarithmic grid: at a
-    quality factor of 1000 the half-power band is 0.05 % wide, while 500
+    quality factor of 1000 the half-power band is 0.1 % wide, while 500
     points over three decades are 1.4 % apart, and a sampled peak sits up to
-    half a step (0.7 %, some fourteen bandwidths) from its pole. A model aligned
+    half a step (0.7 %, seven bandwidths) from its pole. A model aligned
     onto the sampled peaks is that far off each mode, and a local fit does
     not move a mode across more than its width. Vector fitting of the
     impedance (for the peaks) and of the admittance (for the dips) places

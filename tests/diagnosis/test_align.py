@@ -119,7 +119,7 @@ def test_noise_on_a_smooth_response_makes_no_measured_resonance():
 def test_refined_modes_place_sharp_resonances_between_the_samples():
     from estimation.diagnosis.align import measured_modes, refined_modes
 
-    # R 0.5 Ohm: quality factors near 1400 and 1000, half-power bands 0.04-0.05 % wide, and the samples 1.7 % apart
+    # R 0.5 Ohm: quality factors near 1400 and 3200, half-power bands 0.07 % and 0.03 % wide; samples 1.7 % apart
     f = np.logspace(4, 7, 400)
     rng = np.random.default_rng(5)
     l, c1, c2, r = L, C1, C2, 0.5
