@@ -205,9 +205,15 @@ def _aligned_boxed(ctx: Any, fit: FrequencyFit, x: np.ndarray, free: Sequence[in
     """``fit`` within the tolerance box from ``x`` with the resonances aligned (:func:`.align.aligned_start`; the
     columns ``free`` not pulled back), and that fit realigned onto its misfits (:func:`.realign.realigned`, which
     stops at the objective ``good_enough``; the fit itself when no move lowers it). A failed solve raises."""
-    aligned = aligned_start(fit, x, free=free, box=ctx.prior.tau, max_nfev=BOXED_ALIGN_NFEV)
-    boxed = within_box(fit, x if aligned is None else aligned, ctx.prior.tau, max_nfev=200)
+    boxed = _boxed_aligned(ctx, fit, x, free)
     return boxed, realigned(fit, boxed, ctx.floor, good_enough)
+
+
+def _boxed_aligned(ctx: Any, fit: FrequencyFit, x: np.ndarray, free: Sequence[int] = ()) -> FitResult:
+    """``fit`` within the tolerance box from ``x`` with the resonances aligned within it (:func:`.align.aligned_start`,
+    the columns ``free`` not pulled back nor bounded by the box). A failed solve raises."""
+    aligned = aligned_start(fit, x, free=free, box=ctx.prior.tau, max_nfev=BOXED_ALIGN_NFEV)
+    return within_box(fit, x if aligned is None else aligned, ctx.prior.tau, max_nfev=200)
 
 
 def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept: list[dict[str, Any]],
@@ -460,8 +466,7 @@ def _aligned_in_box(ctx: Any, fit: FrequencyFit, current: FitResult, name: str, 
     x = fit.design_vector(origin)
     x[column] = origin[column]
     if not realign:
-        aligned = aligned_start(fit, x, free=[column], box=ctx.prior.tau, max_nfev=BOXED_ALIGN_NFEV)
-        return within_box(fit, x if aligned is None else aligned, ctx.prior.tau, max_nfev=200)
+        return _boxed_aligned(ctx, fit, x, [column])
     out, moved = _aligned_boxed(ctx, fit, x, free=[column], good_enough=ctx.floor)
     if moved is not out:
         # the realignment's fits are not bounded: back within the box
