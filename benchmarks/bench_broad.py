@@ -16,7 +16,10 @@ tolerance equal it (a group's drift: the members of the group reported).
 Some draws hide their effect: the design's model within the tolerance fits
 them (:func:`broad_cases.signature`, measured without the diagnosis); the
 table counts those apart, and a second share takes such a draw as right
-when it is answered with nothing (no cause, no drift).
+when it is answered with nothing (no cause, no drift). A third share counts
+a draw as right when the truth is named among the alternatives the report
+gives beside its answer, in the place of one named: the data fit them as well,
+and the report says it cannot tell which.
 
 Prints one row per draw, then the share right, the false alarms (a cause
 named on a draw with none), the clean draws with drift reported, and the
@@ -60,12 +63,23 @@ def run(seed: int, effect: str | None, folder: Path) -> dict:
     return {"seed": seed, "effect": case.effect, "sections": case.netlist.count("\nL"), "points": case.frequency_hz.size,
             "noise": case.noise, "fmt": case.fmt, "truth": case.causes, "truth_drift": case.drift, "said": d.cause,
             "causes": said, "drift": sorted(drift), "gain": d.gain, "ok": ok, "wall": wall,
-            "signature": signature(case)}
+            "signature": signature(case), "cause_alternatives": sorted({a["cause"] for a in d.cause_alternatives}),
+            "drift_alternatives": sorted(reported_drift(d.drift_alternatives, case.drift))}
 
 
 def _excused(r: dict) -> bool:
     """Right, or the effect hidden in the noise (:data:`broad_cases.VISIBLE`) and nothing named or reported."""
     return r["ok"] or (r["signature"] < VISIBLE and not r["causes"] and not r["drift"])
+
+
+def _among_alternatives(r: dict) -> bool:
+    """Right once the alternatives the report names beside its answer count (the data fit them as well): each cause
+    and drifted value of the truth named, or named as an alternative in the place of one named."""
+    def held(truth: list[str], said: list[str], alternatives: list[str]) -> bool:
+        return sorted(said) == sorted(truth) or (len(said) == len(truth) and set(truth) <= set(said) | set(alternatives))
+    return r["ok"] or (held(r["truth"], r["causes"], r.get("cause_alternatives", []))
+                       and (r["truth_drift"] is None or held(r["truth_drift"], r["drift"],
+                                                             r.get("drift_alternatives", []))))
 
 
 def speed(folder: Path) -> float:
@@ -122,7 +136,9 @@ def main() -> None:
             hidden = [r for r in rows if r["effect"] != "none" and r["signature"] < VISIBLE]
             print(f"right {sum(r['ok'] for r in rows)}/{len(rows)}; effects hidden in the noise {len(hidden)} "
                   f"(signature < {VISIBLE:g}: the design's model within the tolerance fits them); right or hidden and "
-                  f"answered none {sum(_excused(r) for r in rows)}/{len(rows)}")
+                  f"answered none {sum(_excused(r) for r in rows)}/{len(rows)}; right or named among the "
+                  f"alternatives the report gives {sum(_among_alternatives(r) for r in rows)}/{len(rows)}, with the "
+                  f"hidden draws {sum(_among_alternatives(r) or _excused(r) for r in rows)}/{len(rows)}")
             print(f"false alarms {alarms} "
                   f"(of {sum(not r['truth'] for r in rows)} draws without a cause); clean draws with drift "
                   f"{sum(bool(r['drift']) for r in clean)}/{len(clean)}")

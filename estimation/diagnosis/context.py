@@ -71,7 +71,7 @@ class Context:
     #: (:func:`.diagnose._whole_answer`); ``answer_bic`` set on it.
     drift_aside: FitResult | None = None
     #: The best fit of each value the one-value search freed (:func:`.drift.located_drift`), by name, as a start of
-    #: that value's later fits: (objective, effect labels, couplings, values, effect parameters).
+    #: that value's later fits: (objective, effect labels, couplings, values, effect parameters, BIC).
     located: dict[str, tuple] = field(default_factory=dict)
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),

@@ -99,13 +99,16 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]
     # prior left out of both), the fit must lose DRIFT_MIN_DBIC. A value not freed above is freed for this check
     # (the prior held it near the tolerance while the others made up for it), and reported with its freed value.
     kept, current = _needed(ctx, current, freed, drift, log)
+    kept = _with_swaps(kept, _located_swaps(ctx, current, kept), log)
     if len(kept) >= 2:
         one = _one_for_many(ctx, current, freed, kept, log)
         if one is not None:
             kept, current = _needed(ctx, one, [one.freed.lower()], ctx.drift(one), log)
             for d in kept:  # the values that explain the data as well, with the one they stand beside
                 if d["name"] == one.freed:
-                    d["alternatives"] = one.drift_alternatives
+                    seen = {a["name"] for a in d.get("alternatives", [])}
+                    d["alternatives"] = d.get("alternatives", []) + [a for a in one.drift_alternatives
+                                                                     if a["name"] not in seen]
     return with_parallel(current.circuit, current.values, ctx.prior.design, kept), current
 
 
@@ -252,7 +255,7 @@ def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept:
     score([chosen, every])
     ref = scores[tuple(every)][1]
     if not np.isfinite(ref) or scores[tuple(sorted(chosen))][1] - ref < DRIFT_MIN_DBIC:
-        return kept, None
+        return _with_swaps(kept, _swaps(ctx, units, chosen, scores, score), log), None
     while scores[tuple(sorted(chosen))][1] - ref >= DRIFT_MIN_DBIC and len(chosen) < len(units):
         rest = [i for i in every if i not in chosen]
         score([chosen + [i] for i in rest])
@@ -276,7 +279,79 @@ def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept:
     log(f"within the tolerance together, the others beyond it freed: dBIC "
         f"{scores[tuple(sorted(i for i in every if units[i][0] in names))][1] - ref:.1f}; the data need "
         + ", ".join(f"{d['name']} x{d['ratio']:.3g}" for d in out) + " beyond it")
-    return out, box
+    return _with_swaps(out, _swaps(ctx, units, chosen, scores, score), log), box
+
+
+def _swaps(ctx: Any, units: list[list[str]], chosen: list[int],
+           scores: dict[tuple[int, ...], tuple[FitResult | None, float]],
+           score: Callable[[list[list[int]]], None]) -> dict[str, list[dict[str, Any]]]:
+    """For each unit of ``chosen`` (indices into ``units``), the other units that, freed in its place with every
+    other value in its box, fit the data as well (:func:`_box_needed`'s scores: BIC within ``DRIFT_MIN_DBIC``, the
+    criterion by which a value is needed at all) and end beyond the tolerance: name, design, fitted, ratio,
+    delta_bic (against ``chosen``'s own), keyed by the chosen unit's first name.
+
+    Two capacitances to ground at neighbouring nodes of a long winding move the same modes nearly alike; the
+    driving-point impedance at a percent of noise may not tell which of them is off, and the one reported is then
+    as likely the other: the report names both.
+    """
+    base = scores.get(tuple(sorted(chosen)), (None, np.inf))[1]
+    rest = [i for i in range(len(units)) if i not in chosen]
+    if not np.isfinite(base) or not rest:
+        return {}
+    pairs = [(c, o, sorted([j for j in chosen if j != c] + [o])) for c in chosen for o in rest]
+    score([s for _, _, s in pairs])
+    out: dict[str, list[dict[str, Any]]] = {}
+    for c, o, s in pairs:
+        fit, value = scores[tuple(s)]
+        if fit is None or value - base >= DRIFT_MIN_DBIC:
+            continue
+        moved = ctx.prior.drift({units[o][0]: fit.values[units[o][0]]})
+        if moved:
+            out.setdefault(units[c][0], []).append({k: moved[0][k] for k in ("name", "design", "fitted", "ratio")}
+                                                   | {"delta_bic": float(value - base)})
+    return out
+
+
+def _located_swaps(ctx: Any, current: FitResult, entries: list[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+    """For each value of ``entries`` that the one-value search fitted (:func:`located_drift`, ``ctx.located``, on
+    ``current``'s structure, effects and couplings), the other values it fitted that alone explain the data as well:
+    the BIC within ``DRIFT_MIN_DBIC`` of that value's own fit, the value beyond the tolerance and no other more than
+    ``GROSS_DRIFT`` tolerances off. Entries as :func:`_swaps`'.
+
+    The search fits every value alike, each freed from the prior in turn; two values whose fits it cannot tell
+    apart by the criterion a value is needed by are equally the answer, whichever the model settled on.
+    """
+    if ctx.prior is None:
+        return {}
+    labels, couplings, names = [e.label for e in current.effects], tuple(current.couplings), set(current.values)
+    same = {v: o for v, o in ctx.located.items()
+            if len(o) > 5 and o[1] == labels and o[2] == couplings and set(o[3]) == names}
+    out: dict[str, list[dict[str, Any]]] = {}
+    for d in entries:
+        own = same.get(d["name"])
+        if own is None:
+            continue
+        for v, o in sorted(same.items(), key=lambda t: t[1][5]):
+            moved = {e["name"]: e for e in ctx.prior.drift(o[3])}
+            if (v == d["name"] or v not in moved or o[5] - own[5] >= DRIFT_MIN_DBIC
+                    or any(e["sigmas"] > GROSS_DRIFT for n, e in moved.items() if n != v)):
+                continue
+            out.setdefault(d["name"], []).append({k: moved[v][k] for k in ("name", "design", "fitted", "ratio")}
+                                                 | {"delta_bic": float(o[5] - own[5])})
+    return out
+
+
+def _with_swaps(entries: list[dict[str, Any]], swaps: dict[str, list[dict[str, Any]]],
+                log: Callable[[str], None]) -> list[dict[str, Any]]:
+    """``entries`` with each one's swaps (:func:`_swaps`) added to its ``alternatives``, logged."""
+    for d in entries:
+        for a in swaps.get(d["name"], []):
+            if a["name"] in {b["name"] for b in d.get("alternatives", [])}:
+                continue
+            d.setdefault("alternatives", []).append(a)
+            log(f"  {d['name']} or {a['name']} x{a['ratio']:.3g} in its place, every other value within the "
+                    f"tolerance (dBIC {a['delta_bic']:+.1f}): the data do not tell which")
+    return entries
 
 
 def one_at_a_time(origin: np.ndarray, cols: np.ndarray, design: np.ndarray, log_ratios: np.ndarray) -> np.ndarray:
@@ -388,7 +463,7 @@ def _start_from(fit: FrequencyFit, current: FitResult, other: tuple) -> np.ndarr
     """A fit kept by :func:`located_drift` (``ctx.located``: objective, effect labels, couplings, values, effect
     parameters) as a parameter vector of ``fit`` (built on ``current``'s fitted circuit, its values the origin), or
     None when the two models differ in structure, effects or couplings."""
-    _, labels, couplings, values, tail = other
+    labels, couplings, values, tail = other[1:5]
     if labels != [e.label for e in current.effects] or couplings != tuple(current.couplings):
         return None
     x = np.zeros(fit.nc + len(fit.extra))
@@ -799,7 +874,7 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
             # a start of that value's fits within the box (:func:`_one_for_many`): what :func:`_start_from` needs, not
             # the whole fit (the context goes to every parallel job)
             ctx.located[trial.freed] = (trial.objective, [e.label for e in trial.effects], tuple(trial.couplings),
-                                        dict(trial.values), trial.x[current_nc(trial):].copy())
+                                        dict(trial.values), trial.x[current_nc(trial):].copy(), trial.bic)
         if best is None or trial.bic < best.bic:
             best = trial
     if best is None:

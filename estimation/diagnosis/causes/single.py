@@ -97,9 +97,15 @@ def _pool(variants: Sequence[Effect], fitted: Sequence[tuple[FrequencyFit | None
 
 
 def _to_refine(screened: list[Screened], top: int) -> list[Screened]:
-    """The best ``top`` forms of a pool; a form that is a special case of another screened form (one relaxation
-    time of a distribution) is not refined: the wider form's fit covers it, and it would take another's place."""
-    return [t for t in screened if not any(t[1].nested_in(u[1]) for u in screened)][:top]
+    """The best ``top`` forms of a pool by screened cost, and the best by screened BIC when it is not among them
+    (the forms differ in parameter counts, and the refined ones are weighed by BIC: a form with fewer parameters
+    that screens a little above another may be the better); a form that is a special case of another screened form
+    (one relaxation time of a distribution) is not refined: the wider form's fit covers it, and it would take
+    another's place."""
+    open_ = [t for t in screened if not any(t[1].nested_in(u[1]) for u in screened)]
+    out = open_[:top]
+    by_bic = min(open_, key=lambda t: t[3].bic, default=None)
+    return out + ([by_bic] if by_bic is not None and all(by_bic is not t for t in out) else [])
 
 
 def _best_refined(screened: list[Screened], refine: list[Screened], refined: Sequence[FitResult | None],
