@@ -1,4 +1,5 @@
-"""Diagnosis does not mistake a poor optimum of the baseline for a cause, and its relaxation form is realised.
+"""Diagnosis does not mistake a poor optimum of the baseline for a cause; its relaxation form is realised, and its
+round-conductor skin form meets the wire's limits.
 
 Cases come from the independent generator (``hidden_cases``, reference nodal
 solver); whether a hidden cause can be seen at all is decided by
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from estimation.diagnosis import diagnose_frequency
-from estimation.diagnosis.causes.catalogue import (CoreLoss, MagnetisingInductance, SkinEffect, effect_variants,
+from estimation.diagnosis.causes.catalogue import (ConductorSkin, CoreLoss, MagnetisingInductance, SkinEffect, effect_variants,
     winding_groups)
 from pris_cosim.frf.response import Response, ResponseModel
 from pris_cosim.models.builtin import get_model
@@ -81,6 +82,19 @@ def test_skin_relaxation_form_is_realised_by_a_passive_ladder():
     _, note, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 100u\n", p, 1e3, 1e7, f)
     assert "passive" in note
     _assert_within(z, 2.0 * (1 + p["a"] * ((1 + 1j * f / p["fc"]) ** p["b"] - 1)) + 2j * np.pi * f * 100e-6)
+
+
+def test_round_conductor_form_is_realised_by_a_passive_ladder():
+    """The realised ladder's impedance against the wire's ``R (x/2) J0(x)/J1(x) + j w L`` written out here with
+    SciPy's Bessel functions, ``x = (1 - j) sqrt(f/f_c)``."""
+    from scipy.special import jv
+    eff = ConductorSkin(f_ref=1e3, f_max=1e7)
+    p = {"a": 1.0, "fc": 3e4}
+    f = np.logspace(3, 7, 60)
+    _, note, z = _realised(eff, "* one winding section\nR1 n1 x 2.0\nL1 x 0 100u\n", p, 1e3, 1e7, f)
+    assert "passive" in note
+    x = (1 - 1j) * np.sqrt(f / p["fc"])
+    _assert_within(z, 2.0 * (x / 2) * jv(0, x) / jv(1, x) + 2j * np.pi * f * 100e-6)
 
 
 def test_magnetising_relaxation_form_is_realised_by_a_passive_ladder():
@@ -237,3 +251,20 @@ def test_core_loss_realised_after_a_skin_ladder_replaces_the_core_resistor_not_a
     zc = pc["a"] * x / (1 + x)
     winding = 2.0 * (1 + ps["a"] * ((1 + 1j * f / ps["fc"]) ** ps["b"] - 1)) + 2j * np.pi * f * 100e-6
     _assert_within(z, 1 / (1 / zc + 1 / winding))
+
+
+def test_round_conductor_form_meets_the_wire_limits():
+    """The round conductor's skin form against the wire's closed-form limits (skin depth ``delta``, radius ``r``,
+    ``r/delta = s``): far below its corner ``R (1 + j s^2/4 + s^4/48)`` (d.c. resistance and internal inductance
+    ``mu l / 8 pi``); far above, ``R [(1 + j) s/2 + 1/4]``, the current in a skin of depth ``delta``."""
+    e = ConductorSkin(group="all", f_ref=1e3, f_max=1e6)
+    fc = 2e4
+    p = {"a": np.array([1.0]), "fc": np.array([fc])}
+    s = np.array([0.05, 0.1, 300.0, 3000.0])
+    z = e.factor(s ** 2 * fc, p)[0]
+    low = 1 + 1j * s[:2] ** 2 / 4 + s[:2] ** 4 / 48
+    high = (1 + 1j) * s[2:] / 2 + 0.25
+    np.testing.assert_allclose(z[:2], low, rtol=1e-6)
+    np.testing.assert_allclose(z[2:], high, rtol=1e-5)
+    half = {"a": np.array([0.5]), "fc": np.array([fc])}  # half the resistance in the wire, the rest flat
+    np.testing.assert_allclose(e.factor(s ** 2 * fc, half)[0], 0.5 + 0.5 * z, rtol=1e-12)
