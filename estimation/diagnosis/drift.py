@@ -343,14 +343,15 @@ def _located_swaps(ctx: Any, current: FitResult, entries: list[dict[str, Any]]) 
 
 def _with_swaps(entries: list[dict[str, Any]], swaps: dict[str, list[dict[str, Any]]],
                 log: Callable[[str], None]) -> list[dict[str, Any]]:
-    """``entries`` with each one's swaps (:func:`_swaps`) added to its ``alternatives``, logged."""
+    """``entries`` with each one's swaps (:func:`_swaps`, :func:`_located_swaps`) added to its ``alternatives`` (once
+    each), logged."""
     for d in entries:
         for a in swaps.get(d["name"], []):
             if a["name"] in {b["name"] for b in d.get("alternatives", [])}:
                 continue
             d.setdefault("alternatives", []).append(a)
-            log(f"  {d['name']} or {a['name']} x{a['ratio']:.3g} in its place, every other value within the "
-                    f"tolerance (dBIC {a['delta_bic']:+.1f}): the data do not tell which")
+            log(f"  {d['name']} or {a['name']} x{a['ratio']:.3g} in its place, fitted as well (dBIC "
+                f"{a['delta_bic']:+.1f}): the data do not tell which")
     return entries
 
 
@@ -461,7 +462,7 @@ def _one_for_many(ctx: Any, current: FitResult, freed: list[str], kept: list[dic
 
 def _start_from(fit: FrequencyFit, current: FitResult, other: tuple) -> np.ndarray | None:
     """A fit kept by :func:`located_drift` (``ctx.located``: objective, effect labels, couplings, values, effect
-    parameters) as a parameter vector of ``fit`` (built on ``current``'s fitted circuit, its values the origin), or
+    parameters, BIC) as a parameter vector of ``fit`` (built on ``current``'s fitted circuit, its values the origin), or
     None when the two models differ in structure, effects or couplings."""
     labels, couplings, values, tail = other[1:5]
     if labels != [e.label for e in current.effects] or couplings != tuple(current.couplings):
