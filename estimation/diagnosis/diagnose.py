@@ -796,13 +796,16 @@ def _whole_answer(ctx: Context, aside: FitResult, final: FitResult, chosen: list
     every value freed from the prior counted as one parameter. The cause that set the drift aside may not be named
     in the end (a new section refused on the points it was not fitted to), and what the selection names instead
     must then beat the drift itself. Returns ``aside`` (its ``cause_ties`` set) when its BIC is the lower, else
-    None."""
+    None (``final``'s ``cause_ties`` set when it names no cause: a drift as well)."""
     n = final.n_residuals
     final_bic = final.bic + np.log(n) * (1 if getattr(final, "freed", None) else 0)
     said = ", ".join(chosen) or "no cause"
     if aside.answer_bic >= final_bic:
         log(f"{aside.freed} off the design, set aside: {said} has a BIC lower by {aside.answer_bic - final_bic:.1f}",
             ctx.progress)
+        if not chosen:  # the answer is a drift too: the causes its BIC barely tells from it, as when the aside is taken
+            final.cause_ties = list(getattr(final, "cause_ties", [])) + [
+                t for t in _ties(results, final_bic) if abs(t["delta_bic"]) < CAUSE_TIE_DBIC]
         return None
     log(f"{aside.freed} off the design, set aside for a cause: BIC lower by {final_bic - aside.answer_bic:.1f} than "
         f"{said}{' with ' + str(final.freed) if getattr(final, 'freed', None) else ''}: the value's drift is the "
