@@ -307,8 +307,7 @@ def _swaps(ctx: Any, units: list[list[str]], chosen: list[int],
             continue
         moved = ctx.prior.drift({units[o][0]: fit.values[units[o][0]]})
         if moved:
-            out.setdefault(units[c][0], []).append({k: moved[0][k] for k in ("name", "design", "fitted", "ratio")}
-                                                   | {"delta_bic": float(value - base)})
+            out.setdefault(units[c][0], []).append(_alternative(moved[0], value - base))
     return out
 
 
@@ -336,9 +335,13 @@ def _located_swaps(ctx: Any, current: FitResult, entries: list[dict[str, Any]]) 
             if (v == d["name"] or v not in moved or o[5] - own[5] >= DRIFT_MIN_DBIC
                     or any(e["sigmas"] > GROSS_DRIFT for n, e in moved.items() if n != v)):
                 continue
-            out.setdefault(d["name"], []).append({k: moved[v][k] for k in ("name", "design", "fitted", "ratio")}
-                                                 | {"delta_bic": float(o[5] - own[5])})
+            out.setdefault(d["name"], []).append(_alternative(moved[v], o[5] - own[5]))
     return out
+
+
+def _alternative(entry: Mapping[str, Any], delta_bic: float) -> dict[str, Any]:
+    """A drift entry (:meth:`.prior.DesignPrior.drift`) as an alternative: name, design, fitted, ratio, delta_bic."""
+    return {k: entry[k] for k in ("name", "design", "fitted", "ratio")} | {"delta_bic": float(delta_bic)}
 
 
 def _with_swaps(entries: list[dict[str, Any]], swaps: dict[str, list[dict[str, Any]]],
