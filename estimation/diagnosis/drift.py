@@ -98,12 +98,13 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]
     # of the tolerance on its side (design x (1 + tolerance) or / (1 + tolerance); the others refitted, its own
     # prior left out of both), the fit must lose DRIFT_MIN_DBIC. A value not freed above is freed for this check
     # (the prior held it near the tolerance while the others made up for it), and reported with its freed value.
-    kept, current = _needed(ctx, current, freed, drift, log)
+    within = getattr(final, "boxed", None)  # the box's best fit (:meth:`.context.Context.within_design`), if sought
+    kept, current = _needed(ctx, current, freed, drift, log, within)
     kept = _with_swaps(kept, _located_swaps(ctx, current, kept), log)
     if len(kept) >= 2:
         one = _one_for_many(ctx, current, freed, kept, log)
         if one is not None:
-            kept, current = _needed(ctx, one, [one.freed.lower()], ctx.drift(one), log)
+            kept, current = _needed(ctx, one, [one.freed.lower()], ctx.drift(one), log, within)
             for d in kept:  # the values that explain the data as well, with the one they stand beside
                 if d["name"] == one.freed:
                     seen = {a["name"] for a in d.get("alternatives", [])}
@@ -113,19 +114,20 @@ def relaxed_drift(ctx: Any, final: FitResult, log: Callable[[str], None]
 
 
 def _needed(ctx: Any, current: FitResult, freed: list[str], drift: list[dict[str, Any]],
-            log: Callable[[str], None]) -> tuple[list[dict[str, Any]], FitResult]:
+            log: Callable[[str], None], within: FitResult | None = None) -> tuple[list[dict[str, Any]], FitResult]:
     """Of the values ``drift`` of ``current`` (``freed`` from the prior), those the data need beyond the tolerance:
     each held at its edge (:func:`_held_check`, the ``MAX_HELD`` furthest off), then the fewest together
-    (:func:`_fewest_needed`), then with every other value within its box (:func:`_box_needed`). Returns them and
-    the model they are reported from."""
+    (:func:`_fewest_needed`), then with every other value within its box (:func:`_box_needed`). ``within``, the
+    box's best fit of the same structure, is one more start of each hold. Returns them and the model they are
+    reported from."""
     kept = []
-    for d, message in shared_map(_held_check, [(ctx, current, freed, d) for d in drift[:MAX_HELD]]):
+    for d, message in shared_map(_held_check, [(ctx, current, freed, d, within) for d in drift[:MAX_HELD]]):
         if message:
             log(message)
         if d is not None:
             kept.append(d)
     kept = _fewest_needed(ctx, current, freed, kept, log)
-    out, box = _box_needed(ctx, current, drift, kept, log)
+    out, box = _box_needed(ctx, current, drift, kept, log, within)
     return out, box or current
 
 
@@ -219,8 +221,15 @@ def _boxed_aligned(ctx: Any, fit: FrequencyFit, x: np.ndarray, free: Sequence[in
     return within_box(fit, x if aligned is None else aligned, ctx.prior.tau, max_nfev=200)
 
 
+def _same_structure(a: FitResult | None, b: FitResult) -> bool:
+    """``a`` is a fit of ``b``'s values, effects and couplings (a start, or a stand-in, for ``b``'s fits)."""
+    return a is not None and set(a.values) == set(b.values) and tuple(a.couplings) == tuple(b.couplings) \
+        and [e.label for e in a.effects] == [e.label for e in b.effects]
+
+
 def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept: list[dict[str, Any]],
-                log: Callable[[str], None]) -> tuple[list[dict[str, Any]], FitResult | None]:
+                log: Callable[[str], None], within: FitResult | None = None
+                ) -> tuple[list[dict[str, Any]], FitResult | None]:
     """The values of ``drift`` the data need beyond the tolerance when every other returns into its box.
 
     The checks before (each value held at its edge, then the fewest of
@@ -234,8 +243,11 @@ def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept:
     ``DRIFT_MIN_DBIC``, the value whose freeing fits best is added (forward
     selection); then, from the model with them all, the value whose return
     into its box costs least is dropped while the data accept the box
-    (backward). Returns the entries to report and the boxed model they come
-    from (``None`` when ``kept`` stands).
+    (backward). With nothing freed, ``within`` (the box's best fit of the
+    same structure, :meth:`.context.Context.within_design`) stands for the
+    box when it fits better than ``current`` followed onto it. Returns the
+    entries to report and the boxed model they come from (``None`` when
+    ``kept`` stands).
     """
     units = _units(ctx, current, drift[:MAX_HELD])
     names = {d["name"] for d in kept}
@@ -253,6 +265,8 @@ def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept:
 
     every = list(range(len(units)))
     score([chosen, every])
+    if _same_structure(within, current) and within.bic < scores.get((), (None, np.inf))[1]:
+        scores[()] = (within, within.bic)
     ref = scores[tuple(every)][1]
     if not np.isfinite(ref) or scores[tuple(sorted(chosen))][1] - ref < DRIFT_MIN_DBIC:
         return _with_swaps(kept, _swaps(ctx, units, chosen, scores, score), log), None
@@ -670,10 +684,11 @@ def with_parallel(circuit: Circuit, values: Mapping[str, float], design: Mapping
     return out
 
 
-def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple[dict[str, Any] | None, str]:
+def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any], FitResult | None]
+                ) -> tuple[dict[str, Any] | None, str]:
     """One drifted value freed from the prior, then held at the tolerance's edge (:func:`relaxed_drift`).
 
-    ``(ctx, model, freed, drift entry)`` to the entry to report (or None)
+    ``(ctx, model, freed, drift entry, box's best fit or None)`` to the entry to report (or None)
     and a progress line (or ``""``). A value with others of its kind across
     the same two nodes (:func:`parallel_partners`) is one value with them to
     the data: they are freed and held together, their combination (a sum of
@@ -682,7 +697,7 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple
     within its own tolerance, and a node's capacitance 1.3x off passes for
     two within it.)
     """
-    ctx, current, freed, d = args
+    ctx, current, freed, d, within = args
     name = d["name"]
     circuit = current.circuit
     group = [name] + [p for p in parallel_partners(circuit, name)
@@ -712,9 +727,14 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any]]) -> tuple
         edge = float(np.exp(np.copysign(ctx.prior.tau, np.log(combined(free_fit.values)))))
         # the profile at the edge is the lowest cost of any model holding it there: fitted from the freed model
         # moved onto the edge and from the model before freeing moved onto it (a freed value that wanders off
-        # while the others follow it leaves the held fit far from the basin the model was in)
+        # while the others follow it leaves the held fit far from the basin the model was in), and from the box's
+        # best fit moved onto it (a model whose values all sit within the tolerance may lie in another basin than
+        # the one the model settled in: the others beyond the tolerance there made the held value look needed)
+        starts = [free_fit] if free_fit is current else [free_fit, current]
+        if _same_structure(within, current):
+            starts.append(within)
         trials = []
-        for start in (free_fit,) if free_fit is current else (free_fit, current):
+        for start in starts:
             shift = edge / combined(start.values)
             held = start.fitted_circuit().with_values({g: start.values[g] * shift for g in group})
             fit = ctx.fit(held, current.effects, fixed=group, prior=loose, couplings=current.couplings)
