@@ -92,6 +92,17 @@ def test_a_fault_at_the_last_node_that_the_design_within_tolerance_fits_is_hidde
 
 
 @pytest.mark.slow
+def test_an_effect_the_design_within_tolerance_fits_reports_no_drift(tmp_path):
+    """Draw 1210 (five sections, 0.83 % noise): a skin effect that the design's model with every value within the
+    tolerance fits to a few noise units (the generator's signature). The data then need no value beyond the
+    tolerance, whatever basin the fit settles in: nothing named, nothing in ``drift``."""
+    case = draw(1210)
+    assert case.effect == "skin" and signature(case) < 0.5 * VISIBLE
+    d = _diagnose(case, tmp_path)
+    assert not d.causes and not d.drift, (d.cause, d.drift)
+
+
+@pytest.mark.slow
 def test_clean_eight_section_design_on_500_points_is_none_without_drift(tmp_path):
     """Eight sections, 500 points, every value within 10 % of the design: ``none``, nothing in ``drift``, a model
     within twice the noise floor."""
