@@ -240,10 +240,11 @@ def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept:
     followed onto its box (:func:`_boxed`), is weighed against it with every
     value of ``drift`` freed (each freed value, or values in parallel,
     counted as one parameter). While the data reject it by
-    ``DRIFT_MIN_DBIC``, the value whose freeing fits best is added (forward
-    selection); then, from the model with them all, the value whose return
-    into its box costs least is dropped while the data accept the box
-    (backward). With nothing freed, ``within`` (the box's best fit of the
+    ``DRIFT_MIN_DBIC``, or the value whose freeing fits best lowers the BIC
+    by as much, that value is added (forward selection); then, from the
+    model with them all, the value whose return into its box costs least is
+    dropped while the data accept the box without it, against every value
+    freed and against the values kept (backward). With nothing freed, ``within`` (the box's best fit of the
     same structure, :meth:`.context.Context.within_design`) stands for the
     box when it fits better than ``current`` followed onto it. Returns the
     entries to report and the boxed model they come from (``None`` when
@@ -268,21 +269,32 @@ def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept:
     if _same_structure(within, current) and within.bic < scores.get((), (None, np.inf))[1]:
         scores[()] = (within, within.bic)
     ref = scores[tuple(every)][1]
-    if not np.isfinite(ref) or scores[tuple(sorted(chosen))][1] - ref < DRIFT_MIN_DBIC:
+    if not np.isfinite(ref):
         return _with_swaps(kept, _swaps(ctx, units, chosen, scores, score), log), None
-    while scores[tuple(sorted(chosen))][1] - ref >= DRIFT_MIN_DBIC and len(chosen) < len(units):
+    start_set = sorted(chosen)
+    while len(chosen) < len(units):  # forward
+        here = scores[tuple(sorted(chosen))][1]
         rest = [i for i in every if i not in chosen]
         score([chosen + [i] for i in rest])
-        chosen.append(min(rest, key=lambda i: scores[tuple(sorted(chosen + [i]))][1]))
+        add = min(rest, key=lambda i: scores[tuple(sorted(chosen + [i]))][1])
+        if here - ref < DRIFT_MIN_DBIC and here - scores[tuple(sorted(chosen + [add]))][1] < DRIFT_MIN_DBIC:
+            break
+        chosen.append(add)
+    if sorted(chosen) == start_set:
+        return _with_swaps(kept, _swaps(ctx, units, chosen, scores, score), log), None
     # backward: a value needed before another was freed may not be needed beside it (each dropped in turn, from the
-    # model with them all; the one whose drop costs least goes while the data still accept the box)
+    # model with them all; the one whose drop costs least goes while the data accept the box without it, against
+    # every value freed and against the values kept)
     while len(chosen) > 1 and scores[tuple(sorted(chosen))][0] is not None:
+        here = scores[tuple(sorted(chosen))][1]
         start = scores[tuple(sorted(chosen))][0]
         fits = shared_map(_boxed, [(ctx, start, [n for j in chosen if j != i for n in units[j]]) for i in chosen])
         trials = [(f.bic + (len(chosen) - 1) * n_log, i, f) for i, f in zip(chosen, fits) if f is not None]
-        if not trials or min(trials, key=lambda t: t[0])[0] - ref >= DRIFT_MIN_DBIC:
+        if not trials:
             break
         value, drop, fit = min(trials, key=lambda t: t[0])
+        if value - ref >= DRIFT_MIN_DBIC or value - here >= DRIFT_MIN_DBIC:
+            break
         chosen.remove(drop)
         if value < scores.get(tuple(sorted(chosen)), (None, np.inf))[1]:
             scores[tuple(sorted(chosen))] = (fit, value)
