@@ -244,11 +244,11 @@ def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept:
     by as much, that value is added (forward selection); then, from the
     model with them all, the value whose return into its box costs least is
     dropped while the data accept the box without it, against every value
-    freed and against the values kept (backward). With nothing freed, ``within`` (the box's best fit of the
-    same structure, :meth:`.context.Context.within_design`) stands for the
-    box when it fits better than ``current`` followed onto it. Returns the
-    entries to report and the boxed model they come from (``None`` when
-    ``kept`` stands).
+    freed and against the values kept (backward). With nothing freed,
+    ``within`` (the box's best fit of the same structure,
+    :meth:`.context.Context.within_design`) stands for the box when it fits
+    better than ``current`` followed onto it. Returns the entries to report
+    and the boxed model they come from (``None`` when ``kept`` stands).
     """
     units = _units(ctx, current, drift[:MAX_HELD])
     names = {d["name"] for d in kept}
@@ -269,10 +269,8 @@ def _box_needed(ctx: Any, current: FitResult, drift: list[dict[str, Any]], kept:
     if _same_structure(within, current) and within.bic < scores.get((), (None, np.inf))[1]:
         scores[()] = (within, within.bic)
     ref = scores[tuple(every)][1]
-    if not np.isfinite(ref):
-        return _with_swaps(kept, _swaps(ctx, units, chosen, scores, score), log), None
     start_set = sorted(chosen)
-    while len(chosen) < len(units):  # forward
+    while np.isfinite(ref) and len(chosen) < len(units):  # forward
         here = scores[tuple(sorted(chosen))][1]
         rest = [i for i in every if i not in chosen]
         score([chosen + [i] for i in rest])
