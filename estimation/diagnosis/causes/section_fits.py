@@ -63,13 +63,13 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
         res.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"] if effects else \
             ["missing-section"]
         res.cause = "+".join(res.causes)
-        if best is None or ctx.penalised(res) < ctx.penalised(best):
+        if best is None or ctx.penalised_bic(res) < ctx.penalised_bic(best):
             best = res
     # a missing section alone (no cause named yet): the design's sections split with their couplings free
     if not effects and ctx.nominal is not None and (ctx.unfit(base)
                                                     or ctx.distorted(base)):
         split = _split_nominal(ctx, effects, tail, ports)
-        if split is not None and (best is None or ctx.penalised(split) < ctx.penalised(best)):
+        if split is not None and (best is None or ctx.penalised_bic(split) < ctx.penalised_bic(best)):
             best = split
             best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
             best.cause = "+".join(best.causes)
@@ -81,7 +81,7 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
                                 good_enough=NOISE_MARGIN * STRUCTURAL_FLOOR * ctx.floor)
         if found is not None:
             found[0].unmerged = found[1]  # ranked with its halves merged back (:meth:`.Context.penalised`)
-        if found is not None and (best is None or ctx.penalised(found[0]) < ctx.penalised(best)):
+        if found is not None and (best is None or ctx.penalised_bic(found[0]) < ctx.penalised_bic(best)):
             best, um, merged = found
             best.structure = um.candidate.how
             best.merged_back = {**merged.values, **um.merged_back(merged.fitted_circuit())}
@@ -231,8 +231,10 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     is built from the *fitted* model's values, with the couplings of the two new inductors free (the coupling
     partition of the split), and again respaced (every distance counted along the winding made one section longer,
     :class:`.unmerge.Unmerged`), its couplings then held at the winding's profile. Its ``SPLIT_SEEDS`` best seeds
-    (by cost) are fitted through smoothed errors (every section's, shared with the helper process). The ``SPLIT_REFINED`` best splits, ranked by objective with their
-    halves merged back under the prior (:meth:`.context.Context.penalised`), are fitted again from
+    (by cost) are fitted through smoothed errors (every section's, shared with the helper process). The
+    ``SPLIT_REFINED`` best splits, ranked by BIC with their halves merged back under the prior
+    (:meth:`.context.Context.penalised_bic`: a split with its couplings free has more parameters than one respaced,
+    and only a lower cost worth them ranks it first), are fitted again from
     ``SPLIT_STARTS`` random starts around them, as the baseline is (:func:`.baseline.fit_multistart`): the equal
     halves of a split are a saddle of the split model, and the seeds' partitions are a few points of a space the
     random starts sample more widely. Every section of every winding is tried, so the search does not depend on
@@ -248,7 +250,7 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     items = [(ctx, circuit, ch, j, respaced, effects, tail) for ch in find_chains(circuit, ports)
              for j in range(len(ch.sections)) for respaced in (False, True)]
     seeded = [s for s in shared_map(_split_seeded, items) if s is not None]
-    seeded.sort(key=lambda s: ctx.penalised(s[1]))
+    seeded.sort(key=lambda s: ctx.penalised_bic(s[1]))
     log(f"  {len(seeded)} splits fitted from their seeds ({time.perf_counter() - t:.1f} s)"
         + (f"; best {seeded[0][0].candidate.how}: cost {seeded[0][1].cost:.4g}" if seeded else ""), ctx.progress)
     best = None
@@ -269,7 +271,7 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
         res.causes = [c for c in base.causes if c not in ("none", "missing-section")] + ["missing-section"]
         res.cause = "+".join(res.causes)
         log(f"  {um.candidate.how}: cost {res.cost:.4g} ({time.perf_counter() - t:.1f} s)", ctx.progress)
-        if best is None or ctx.penalised(res) < ctx.penalised(best):
+        if best is None or ctx.penalised_bic(res) < ctx.penalised_bic(best):
             best = res
     return best
 

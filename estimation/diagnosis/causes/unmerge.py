@@ -464,7 +464,7 @@ def search_unmerged(make_fit: Callable, f: np.ndarray, measured: Mapping[str, np
             break
     found = [_finish(min(group, key=lambda t: t[0]), make_fit, max_nfev, coupling_nfev, free_couplings)
              for group in (screened, continued) if group]
-    return min(found, key=lambda t: t[0].objective) if found else None
+    return min(found, key=lambda t: t[0].bic) if found else None
 
 
 def _seed_fitted(args: tuple[Any, np.ndarray, dict[str, Any]]) -> Any:
