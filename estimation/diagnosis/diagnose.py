@@ -740,10 +740,12 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     """
     progress = ctx.progress
     one = None
+    # the lowest objective a cause reached: the one-value search seeks each value's best fit at least that hard
+    rival = min((r.objective for r in results.values()), default=None)
     if group is not None and baseline is not located_on:
         # one value off the design is the other description of a drift with one parameter: a value 3x its design
         # moves its group's mean beyond the tolerance too, and the lower BIC of the two tells which it is
-        one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress))
+        one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress), rival)
         located_on = baseline
         if one is not None and one.bic < group[0].bic:
             log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {one.freed} alone off the design has a BIC lower by "
@@ -768,7 +770,7 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     if ctx.prior is None or not search or not results or (ctx.explained(baseline) and ctx.within_design(baseline)):
         return baseline, None, False, located_on
     if baseline is not located_on:
-        one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress))
+        one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress), rival)
     if one is None:
         return baseline, None, False, baseline
     o_bic = one.bic + np.log(one.n_residuals)

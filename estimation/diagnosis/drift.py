@@ -19,6 +19,7 @@ import numpy as np
 from pris_cosim.circuits.circuit import Circuit, node_name
 
 from estimation.diagnosis.align import aligned_start, resonance_mismatch
+from estimation.diagnosis.baseline import fit_multistart
 from estimation.diagnosis.cores import shared_map
 from estimation.diagnosis.fit import CANDIDATE_FAILURES, FitResult, FrequencyFit, current_nc
 from estimation.diagnosis.onto_box import onto_box, within_box
@@ -776,6 +777,21 @@ def freed_fit(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
     return trial
 
 
+def freed_multistart(args: tuple[Any, FitResult, str, np.ndarray, float]) -> FitResult | None:
+    """``(ctx, model, name, start, reach)`` to the model fitted with the value ``name`` freed from its prior, from
+    ``start`` and from random starts around it as the baseline is (:func:`.baseline.fit_multistart`), those tried
+    unless the fit from ``start`` reaches ``reach``; None when the fit fails (:func:`located_drift`)."""
+    ctx, final, name, x0, reach = args
+    loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
+    try:
+        one = ctx.fit(final.fitted_circuit(), final.effects, prior=loose, couplings=final.couplings)
+        trial = fit_multistart(one, good_enough=reach, x0=x0, floor=ctx.floor)
+    except CANDIDATE_FAILURES:
+        return None
+    trial.freed = name
+    return trial
+
+
 def release_gains(fit: FrequencyFit, x: np.ndarray) -> np.ndarray:
     """Predicted fall of the weighted sum of squared residuals when each anchored value's prior is released.
 
@@ -827,7 +843,8 @@ LOCATE_SCAN = 21
 LOCATE_FITS = 4
 
 
-def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str], None]) -> FitResult | None:
+def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str], None],
+                  rival: float | None = None) -> FitResult | None:
     """The final model refitted with one design value off the design, if that alone explains the data.
 
     Under the log-normal prior a value that is really off (a capacitance
@@ -855,6 +872,13 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     ``DRIFT_MIN_DBIC`` of it, are kept as ``drift_alternatives`` (name,
     design, fitted, ratio, delta_bic): a driving-point impedance may not
     tell which of two values far apart in a winding changed.
+
+    With ``rival`` (the lowest objective a rival model reached, a cause
+    or a structure) above the best local fit, every value tried is fitted
+    again from random starts (:func:`freed_multistart`): a local fit from a
+    model whose other values sit a few per cent off stalls on the sharp
+    resonances of a lightly damped winding, and a value is weighed against
+    its rivals by its best fit, not by where a local fit stopped.
 
     Returns
     -------
@@ -911,6 +935,25 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
                                         dict(trial.values), trial.x[current_nc(trial):].copy(), trial.bic)
         if best is None or trial.bic < best.bic:
             best = trial
+    if best is not None and rival is not None and best.objective > rival:
+        # the local fits stopped above the objective a rival model reached: the data can be fitted closer than they
+        # came, and each value's profile is the lowest cost of any model with it free, so each value tried is
+        # fitted again from random starts around its best fit (until one reaches the rival), as the baseline is
+        t = time.perf_counter()
+        own = {}
+        for trial in trials:
+            if trial.freed not in own or trial.objective < own[trial.freed].objective:
+                own[trial.freed] = trial
+        for trial in shared_map(freed_multistart, [(ctx, final, v, o.x, rival) for v, o in own.items()]):
+            if trial is not None and trial.objective < own[trial.freed].objective:
+                trials.append(trial)
+                ctx.located[trial.freed] = (trial.objective, [e.label for e in trial.effects],
+                                            tuple(trial.couplings), dict(trial.values),
+                                            trial.x[current_nc(trial):].copy(), trial.bic)
+                if trial.bic < best.bic:
+                    best = trial
+        log(f"one value off the design: {len(own)} values fitted again from random starts, a rival reaching "
+            f"{rival:.4g} ({time.perf_counter() - t:.1f} s)")
     if best is None:
         return None
     dbic = final.bic - best.bic
