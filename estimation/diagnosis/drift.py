@@ -779,13 +779,15 @@ def freed_fit(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
 
 def freed_multistart(args: tuple[Any, FitResult, str, np.ndarray, float]) -> FitResult | None:
     """``(ctx, model, name, start, reach)`` to the model fitted with the value ``name`` freed from its prior, from
-    ``start`` and from random starts around it as the baseline is (:func:`.baseline.fit_multistart`), those tried
-    unless the fit from ``start`` reaches ``reach``; None when the fit fails (:func:`located_drift`)."""
+    the design with that value as in ``start`` (every other value at its design value) and from random starts
+    around it as the baseline is (:func:`.baseline.fit_multistart`), those tried unless the fit from the design
+    reaches ``reach``; None when the fit fails (:func:`located_drift`). The fitted values that made up for the
+    value under its prior are left behind: they hold the basin the local fits stopped in."""
     ctx, final, name, x0, reach = args
     loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
     try:
         one = ctx.fit(final.fitted_circuit(), final.effects, prior=loose, couplings=final.couplings)
-        trial = fit_multistart(one, good_enough=reach, x0=x0, floor=ctx.floor)
+        trial = fit_multistart(one, good_enough=reach, x0=one.design_vector(x0), floor=ctx.floor)
     except CANDIDATE_FAILURES:
         return None
     trial.freed = name
@@ -938,7 +940,8 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
     if best is not None and rival is not None and best.objective > rival:
         # the local fits stopped above the objective a rival model reached: the data can be fitted closer than they
         # came, and each value's profile is the lowest cost of any model with it free, so each value tried is
-        # fitted again from random starts around its best fit (until one reaches the rival), as the baseline is
+        # fitted again from the design with it at its best fit's ratio and from random starts around that (until
+        # one reaches the rival), as the baseline is
         t = time.perf_counter()
         own = {}
         for trial in trials:
