@@ -869,10 +869,11 @@ HELD_OUT_SE = 2.0
 def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResult],
           prior: DesignPrior | None = None) -> bool:
     """A drift answer (its fit and BIC with the drift's parameters counted) that the structures must be weighed
-    against at their best: its model does not explain the data (above the noise, or a value besides the drift's own
-    more than ``GROSS_DRIFT`` tolerances off: the group's under its ``prior``, the freed value not counted), or a
-    new section's fit (a local optimum of a search that is not complete), refitted to convergence first (it replaces
-    its entry in ``results``), comes within ``DRIFT_MIN_DBIC`` ("very strong") of it."""
+    against at their best: its model does not explain the data within the design (above the noise, or a value
+    besides the drift's own beyond the tolerance: the group's under its ``prior``, the freed value not counted; the
+    drift would then be of several values, each a parameter the answer's BIC did not count), or a new section's fit
+    (a local optimum of a search that is not complete), refitted to convergence first (it replaces its entry in
+    ``results``), comes within ``DRIFT_MIN_DBIC`` ("very strong") of it."""
     section = results.get("missing-section")
     if section is not None:
         # weighed at its own convergence, as the drift's fit is: a split's first fit stops after tens of evaluations
@@ -880,7 +881,7 @@ def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResu
     if section is not None and section.bic - bic < DRIFT_MIN_DBIC:
         return True
     freed = str(getattr(drift, "freed", "")).lower()
-    others = [d for d in ctx.gross(drift, prior) if d["name"].lower() != freed]
+    others = [d for d in ctx.drift(drift, prior) if d["name"].lower() != freed]
     return drift.objective > NOISE_MARGIN * ctx.floor or bool(others)
 
 
