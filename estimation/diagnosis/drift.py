@@ -763,14 +763,18 @@ def _held_check(args: tuple[Any, FitResult, list[str], dict[str, Any], FitResult
                   f"(dBIC {d['delta_bic']:.1f} at its edge): not reported")
 
 
+def _freed(ctx: Any, final: FitResult, name: str) -> FrequencyFit:
+    """The fit of ``final``'s model with the value ``name`` freed from the design prior."""
+    loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
+    return ctx.fit(final.fitted_circuit(), final.effects, prior=loose, couplings=final.couplings)
+
+
 def freed_fit(args: tuple[Any, FitResult, str, np.ndarray]) -> FitResult | None:
     """``(ctx, model, name, start)`` to the model fitted from ``start`` with the value ``name`` freed from its prior
     (``freed`` set to it), or None when the fit fails (:func:`located_drift`)."""
     ctx, final, name, x0 = args
-    loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
     try:
-        one = ctx.fit(final.fitted_circuit(), final.effects, prior=loose, couplings=final.couplings)
-        trial = one.fit_continued(x0, max_nfev=100, tol=1e-7)
+        trial = _freed(ctx, final, name).fit_continued(x0, max_nfev=100, tol=1e-7)
     except CANDIDATE_FAILURES:
         return None
     trial.freed = name
@@ -784,9 +788,8 @@ def freed_multistart(args: tuple[Any, FitResult, str, np.ndarray, float]) -> Fit
     reaches ``reach``; None when the fit fails (:func:`located_drift`). The fitted values that made up for the
     value under its prior are left behind: they hold the basin the local fits stopped in."""
     ctx, final, name, x0, reach = args
-    loose = replace(ctx.prior, design={n: v for n, v in ctx.prior.design.items() if n != name.lower()})
     try:
-        one = ctx.fit(final.fitted_circuit(), final.effects, prior=loose, couplings=final.couplings)
+        one = _freed(ctx, final, name)
         trial = fit_multistart(one, good_enough=reach, x0=one.design_vector(x0), floor=ctx.floor)
     except CANDIDATE_FAILURES:
         return None
@@ -877,7 +880,8 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
 
     With ``rival`` (the lowest objective a rival model reached, a cause
     or a structure) above the best local fit, every value tried is fitted
-    again from random starts (:func:`freed_multistart`): a local fit from a
+    again from the design with it at its best ratio and from random starts
+    around that (:func:`freed_multistart`): a local fit from a
     model whose other values sit a few per cent off stalls on the sharp
     resonances of a lightly damped winding, and a value is weighed against
     its rivals by its best fit, not by where a local fit stopped.
