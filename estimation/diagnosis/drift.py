@@ -848,6 +848,16 @@ LOCATE_SCAN = 21
 LOCATE_FITS = 4
 
 
+def _remember(ctx: Any, trial: FitResult) -> None:
+    """Keep ``trial`` in ``ctx.located`` when it is the best fit of its freed value so far: a start of that value's
+    fits within the box (:func:`_one_for_many`), what :func:`_start_from` needs, not the whole fit (the context goes
+    to every parallel job)."""
+    seen = ctx.located.get(trial.freed)
+    if seen is None or trial.objective < seen[0]:
+        ctx.located[trial.freed] = (trial.objective, [e.label for e in trial.effects], tuple(trial.couplings),
+                                    dict(trial.values), trial.x[current_nc(trial):].copy(), trial.bic)
+
+
 def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str], None],
                   rival: float | None = None) -> FitResult | None:
     """The final model refitted with one design value off the design, if that alone explains the data.
@@ -933,12 +943,7 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
         if trial is None:
             continue
         trials.append(trial)
-        seen = ctx.located.get(trial.freed)
-        if seen is None or trial.objective < seen[0]:
-            # a start of that value's fits within the box (:func:`_one_for_many`): what :func:`_start_from` needs, not
-            # the whole fit (the context goes to every parallel job)
-            ctx.located[trial.freed] = (trial.objective, [e.label for e in trial.effects], tuple(trial.couplings),
-                                        dict(trial.values), trial.x[current_nc(trial):].copy(), trial.bic)
+        _remember(ctx, trial)
         if best is None or trial.bic < best.bic:
             best = trial
     if best is not None and rival is not None and best.objective > rival:
@@ -954,9 +959,7 @@ def located_drift(ctx: Any, final: FitResult, target: float, log: Callable[[str]
         for trial in shared_map(freed_multistart, [(ctx, final, v, o.x, rival) for v, o in own.items()]):
             if trial is not None and trial.objective < own[trial.freed].objective:
                 trials.append(trial)
-                ctx.located[trial.freed] = (trial.objective, [e.label for e in trial.effects],
-                                            tuple(trial.couplings), dict(trial.values),
-                                            trial.x[current_nc(trial):].copy(), trial.bic)
+                _remember(ctx, trial)
                 if trial.bic < best.bic:
                     best = trial
         log(f"one value off the design: {len(own)} values fitted again from random starts, a rival reaching "
