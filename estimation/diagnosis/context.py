@@ -68,7 +68,7 @@ class Context:
     #: Points quiet enough to show resonances, by response (:func:`.unmerge.resolved_points`); empty: all.
     resolved: dict[str, np.ndarray] = field(default_factory=dict)
     #: One value off the design set aside for a cause with a lower BIC, weighed again against the final answer
-    #: (:func:`.diagnose._whole_answer`); ``answer_bic`` set on it.
+    #: (:func:`.causes.rivals.whole_answer`); ``answer_bic`` set on it.
     drift_aside: FitResult | None = None
     #: The best fit of each value the one-value search freed (:func:`.drift.located_drift`), by name, as a start of
     #: that value's later fits: (objective, effect labels, couplings, values, effect parameters, BIC).

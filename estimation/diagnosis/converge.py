@@ -18,7 +18,7 @@ there (design missing section + skin effect 702). Weighed against a drift,
 a new section alone is refitted all the same: the drift's own fit is
 converged, and a split's first fit stopped 19 in BIC short of its
 convergence on design missing section 700
-(:func:`.diagnose._open`, :func:`.diagnose._cause_over_drift`).
+(:func:`.diagnose._open`, :func:`.causes.rivals.cause_over_drift`).
 """
 
 from __future__ import annotations

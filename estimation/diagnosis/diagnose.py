@@ -98,6 +98,7 @@ from estimation.diagnosis.holdout import held_out_gain
 from estimation.diagnosis.prior import DEFAULT_TOLERANCE, DesignPrior, design_prior
 from estimation.diagnosis.causes.forms import rechoose_forms
 from estimation.diagnosis.causes.realise import realise_extended
+from estimation.diagnosis.causes.rivals import CAUSE_TIE_DBIC, cause_over_drift, ties, whole_answer
 from estimation.diagnosis.report import parallel_note
 from estimation.diagnosis.result import Diagnosis
 from estimation.diagnosis.causes.section_fits import (every_section_split, section_pairs,
@@ -433,7 +434,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                     ctx.prior = prior = prior_before
     aside = ctx.drift_aside
     if aside is not None and group_entry is None:
-        taken = _whole_answer(ctx, aside, extended or baseline, chosen, results)
+        taken = whole_answer(ctx, aside, extended or baseline, chosen, results)
         if taken is not None:
             baseline, extended, current, chosen, steps = taken, None, taken, [], []
     on_top, relaxed = relaxed_drift(ctx, extended or baseline, lambda m: log(m, progress)) if prior is not None \
@@ -452,7 +453,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             ctx.prior = prior = prior_before
             on_top, relaxed = relaxed_drift(ctx, baseline, lambda m: log(m, progress))
     if prior is not None and not chosen and on_top and group_entry is None and results:
-        named = _cause_over_drift(ctx, relaxed, on_top, results)
+        named = cause_over_drift(ctx, relaxed, on_top, results)
         if named is not None:
             extended = current = named
             chosen = list(named.causes or [named.cause])
@@ -539,11 +540,6 @@ def _share(ctx: Context, current: FitResult, share: float) -> float:
     excess = max(0.0, current.cost - ctx.floor)
     return share * min(1.0, excess / current.objective) if current.objective > 0 else share
 
-
-#: Two causes whose fits alone are this close in BIC are reported as not told apart by the data
-#: (:attr:`.result.Diagnosis.cause_alternatives`): below 2 the evidence is "not worth more than a bare mention" on
-#: Kass and Raftery's scale.
-CAUSE_TIE_DBIC = 2.0
 
 
 def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], results: dict[str, FitResult],
@@ -763,7 +759,7 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
             ctx.prior = group[1]
             failed += [{"cause": c, "cost": r.cost, "reason": "the drift of a group explains the data with a lower BIC"}
                        for c, r in results.items()]
-            group[0].cause_ties = _ties(results, g_bic)
+            group[0].cause_ties = ties(results, g_bic)
             return group[0], group[2], True, located_on
         log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {rival.cause} has a BIC lower by {g_bic - rival.bic:.1f}:"
             " not reported", progress)
@@ -782,82 +778,13 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
             f"{rival.bic - o_bic:.1f} higher): the value's drift explains the data, no cause", progress)
         failed += [{"cause": c, "cost": r.cost, "reason": "the drift of one value explains the data with a lower BIC"}
                    for c, r in results.items()]
-        one.cause_ties = _ties(results, o_bic)
+        one.cause_ties = ties(results, o_bic)
         return one, None, True, baseline
     log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.bic:.1f}: set aside",
         progress)
-    one.answer_bic = float(o_bic)  # weighed again against the answer the selection gives (:func:`_whole_answer`)
+    one.answer_bic = float(o_bic)  # weighed again against the selection's answer (:func:`.causes.rivals.whole_answer`)
     ctx.drift_aside = one
     return baseline, None, False, baseline
-
-
-def _whole_answer(ctx: Context, aside: FitResult, final: FitResult, chosen: list[str],
-                  results: dict[str, FitResult]) -> FitResult | None:
-    """One value off the design set aside for a cause whose single fit had a lower BIC (:func:`_drift_answer`),
-    weighed against the answer the selection gave (``final``, its causes ``chosen``), both whole: their BIC with
-    every value freed from the prior counted as one parameter. The cause that set the drift aside may not be named
-    in the end (a new section refused on the points it was not fitted to), and what the selection names instead
-    must then beat the drift itself. Returns ``aside`` (its ``cause_ties`` set) when its BIC is the lower, else
-    None (``final``'s ``cause_ties`` set when it names no cause: a drift as well)."""
-    n = final.n_residuals
-    final_bic = final.bic + np.log(n) * (1 if getattr(final, "freed", None) else 0)
-    said = ", ".join(chosen) or "no cause"
-    if aside.answer_bic >= final_bic:
-        log(f"{aside.freed} off the design, set aside: {said} has a BIC lower by {aside.answer_bic - final_bic:.1f}",
-            ctx.progress)
-        if not chosen:  # the answer is a drift too: the causes its BIC barely tells from it, as when the aside is taken
-            final.cause_ties = list(getattr(final, "cause_ties", [])) + [
-                t for t in _ties(results, final_bic) if abs(t["delta_bic"]) < CAUSE_TIE_DBIC]
-        return None
-    log(f"{aside.freed} off the design, set aside for a cause: BIC lower by {final_bic - aside.answer_bic:.1f} than "
-        f"{said}{' with ' + str(final.freed) if getattr(final, 'freed', None) else ''}: the value's drift is the "
-        "answer", ctx.progress)
-    ties = [t for t in _ties(results, aside.answer_bic) if abs(t["delta_bic"]) < CAUSE_TIE_DBIC]
-    if chosen and final_bic - aside.answer_bic < CAUSE_TIE_DBIC and " + ".join(chosen) not in {t["cause"] for t in ties}:
-        ties.append({"cause": " + ".join(chosen), "delta_bic": float(final_bic - aside.answer_bic)})
-    aside.cause_ties = ties
-    return aside
-
-
-def _cause_over_drift(ctx: Context, relaxed: FitResult, on_top: list[dict[str, Any]],
-                      results: dict[str, FitResult]) -> FitResult | None:
-    """A cause that explains the data (at the noise, no value far off) with a lower BIC than the drift the selection
-    left to be reported, both whole: the drift's model with each value reported off counted as one parameter. The
-    selection weighs a cause against the baseline under the prior, whose BIC holds the values it pulled back; the
-    values reported off are freed from the prior, and that answer is the one the cause must beat. Both are weighed
-    converged: the drift's model is (:func:`.drift.relaxed_drift`), and every cause is refitted from its own values
-    (:func:`.converge.converged`, a new section too: no selection goes on from it) before the ones that explain the
-    data are sought among them. Returns the cause's fit (the refits replace the causes' entries in ``results``), or
-    None; a drift lower by less than ``CAUSE_TIE_DBIC`` gets the cause in ``relaxed.cause_tie``."""
-    keys = list(results)
-    for c, r in zip(keys, shared_map(converged_job, [(ctx, results[c], True) for c in keys])):
-        if r is not results[c]:
-            log(f"  {c} refitted to convergence: {results[c].objective:.4g} -> {r.objective:.4g}", ctx.progress)
-            results[c] = r
-    rivals = [r for r in results.values() if ctx.explained(r)]
-    if not rivals:
-        return None
-    best = min(rivals, key=lambda r: r.bic)
-    drift_bic = relaxed.bic + len(on_top) * np.log(relaxed.n_residuals)
-    names = ", ".join(d["name"] for d in on_top)
-    if best.bic >= drift_bic:
-        log(f"{names} off the design: BIC {best.bic - drift_bic:.1f} below {best.cause}, the best cause that explains "
-            "the data", ctx.progress)
-        if best.bic - drift_bic < CAUSE_TIE_DBIC:
-            relaxed.cause_tie = [{"cause": best.cause, "delta_bic": float(best.bic - drift_bic)}]
-        return None
-    log(f"{best.cause} explains the data with a BIC lower by {drift_bic - best.bic:.1f} than {names} off the design "
-        "(each counted): named", ctx.progress)
-    best.drift_tie = ([{"cause": f"drift of {names}", "delta_bic": float(drift_bic - best.bic)}]
-                      if drift_bic - best.bic < CAUSE_TIE_DBIC else [])
-    return best
-
-
-def _ties(results: dict[str, FitResult], drift_bic: float) -> list[dict[str, Any]]:
-    """The single causes whose BIC is within ``CAUSE_TIE_DBIC`` of a drift that explains the data (``cause``,
-    ``delta_bic``): the data tell the drift only barely from them."""
-    ranked = sorted(results.values(), key=lambda r: r.bic)
-    return [{"cause": r.cause, "delta_bic": float(r.bic - drift_bic)} for r in ranked if r.bic - drift_bic < CAUSE_TIE_DBIC]
 
 
 #: Standard errors of the paired held-out gain below the share needed (:func:`_share`; zero at the noise) at which a

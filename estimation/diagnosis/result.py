@@ -49,7 +49,7 @@ class Diagnosis(DiagnosisOutcome):
     baseline_drift: list[dict[str, Any]] = field(default_factory=list)
     #: Other values off the design that explain the data as well as the one reported (:func:`.drift.located_drift`).
     drift_alternatives: list[dict[str, Any]] = field(default_factory=list)
-    #: Causes whose fit alone is within :data:`.diagnose.CAUSE_TIE_DBIC` in BIC of the first cause named, or of the
+    #: Causes whose fit alone is within :data:`.causes.rivals.CAUSE_TIE_DBIC` in BIC of the first cause named, or of the
     #: drift that explains the data when none is named (``cause``, ``delta_bic``): the data do not tell them apart (a skin effect's and a lamination's impedance both grow as
     #: ``(1 + j) sqrt(f)`` well above their corners).
     cause_alternatives: list[dict[str, Any]] = field(default_factory=list)
