@@ -340,7 +340,6 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     baseline, group_entry, answered, located_on = _drift_answer(ctx, baseline, group, results, failed, None,
                                                                  bool(passes), every_split)
     prior = ctx.prior
-    weighed = results  # what a drift answer was weighed against, counting its located value alone (weighed again)
     if answered:
         results, passes = {}, 0
     every_split()
@@ -453,12 +452,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             baseline, group_entry = alone, None
             ctx.prior = prior = prior_before
             on_top, relaxed = relaxed_drift(ctx, baseline, lambda m: log(m, progress))
-    if prior is not None and not chosen and on_top and group_entry is None and (results or weighed):
-        # a drift taken as the answer (``weighed``) was weighed with its located value alone counted; every value
-        # reported is a parameter of the answer, and the causes are weighed again against it whole
-        named = cause_over_drift(ctx, relaxed, on_top, results or weighed)
+    if prior is not None and not chosen and on_top and group_entry is None and results:
+        named = cause_over_drift(ctx, relaxed, on_top, results)
         if named is not None:
-            results = results or weighed
             extended = current = named
             chosen = list(named.causes or [named.cause])
             steps = [{"cause": chosen[-1], "gain": 1 - named.objective / baseline.objective,
@@ -466,9 +462,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                       "total_gain": 1 - named.objective / baseline.objective, "model": named.structure}]
             on_top, relaxed = relaxed_drift(ctx, named, lambda m: log(m, progress))
         elif getattr(relaxed, "cause_tie", None):  # a cause barely told from the drift: reported beside it
-            said = {t["cause"] for t in relaxed.cause_tie}  # weighed whole, in the place of its entry as one value
-            baseline.cause_ties = [t for t in getattr(baseline, "cause_ties", []) if t["cause"] not in said] + \
-                relaxed.cause_tie
+            baseline.cause_ties = list(getattr(baseline, "cause_ties", [])) + relaxed.cause_tie
     if (prior is not None and not chosen and not on_top and group_entry is None and ctx.drift(baseline)
             and ctx.within_design(baseline) and baseline.boxed is not None and ctx.explained(baseline.boxed)):
         baseline = baseline.boxed  # ``none``: the model returned has every value within the tolerance
