@@ -178,6 +178,12 @@ def section_pairs(ctx: Context, results: dict[str, FitResult], baseline: FitResu
 SPLIT_STARTS = 8
 #: Seeds of each split (:meth:`.unmerge.Unmerged.seeds`, ranked by their cost) fitted through smoothed errors.
 SPLIT_SEEDS = 3
+#: Splits refitted from random starts (:func:`split_every_section`): the best of the seeded fits, ranked by their
+#: objective with the merged halves' penalty. The random starts move a seeded split by a share of its cost (the
+#: equal-halves saddle); they do not turn a split that fits no better than the rest into the best one.
+SPLIT_REFINED = 3
+
+
 def _split_seeded(args: tuple[Context, Any, Any, int, bool, Sequence[Effect], np.ndarray]) -> tuple[Any, Any] | None:
     """Section ``j`` of chain ``ch`` made two (``respaced``: the winding one section longer) and fitted from its
     best seeds (:func:`split_every_section`): ``(Unmerged, FitResult)``, None when the split cannot be built or
@@ -225,17 +231,16 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     is built from the *fitted* model's values, with the couplings of the two new inductors free (the coupling
     partition of the split), and again respaced (every distance counted along the winding made one section longer,
     :class:`.unmerge.Unmerged`), its couplings then held at the winding's profile. Its ``SPLIT_SEEDS`` best seeds
-    (by cost) are fitted through smoothed errors (every section's, shared with the helper process). Every split
-    is then fitted again from ``SPLIT_STARTS`` random starts around its seeded fit, as the baseline is
-    (:func:`.baseline.fit_multistart`): the equal halves of a split are a saddle of the split model, and the seeds'
-    partitions are a few points of a space the random starts sample more widely. Each is refined, not the few
-    best seeded: a seeded fit stops after a hundred evaluations, and where it stopped does not tell where its
-    structure reaches (a seven-section winding, 0.23 % noise: the true split of section 3 from the design values
-    stopped 25 % above the noise, ninth of fourteen; refined, it is the best by 28 in BIC). The best is the one of
-    lowest BIC with its halves merged back under the prior (:meth:`.context.Context.penalised_bic`: a split with
-    its couplings free has more parameters than one respaced, and only a lower cost worth them ranks it first).
-    Every section of every winding is tried, so the search does not depend on where the misfit seemed to sit.
+    (by cost) are fitted through smoothed errors (every section's, shared with the helper process). The
+    ``SPLIT_REFINED`` best splits, ranked by BIC with their halves merged back under the prior
+    (:meth:`.context.Context.penalised_bic`: a split with its couplings free has more parameters than one respaced,
+    and only a lower cost worth them ranks it first), are fitted again from
+    ``SPLIT_STARTS`` random starts around them, as the baseline is (:func:`.baseline.fit_multistart`): the equal
+    halves of a split are a saddle of the split model, and the seeds' partitions are a few points of a space the
+    random starts sample more widely. Every section of every winding is tried, so the search does not depend on
+    where the misfit seemed to sit.
     """
+    from estimation.diagnosis.baseline import fit_multistart
     from estimation.diagnosis.causes.sections import find_chains
 
     circuit = ctx.nominal if from_design and ctx.nominal is not None else base.fitted_circuit()
@@ -248,45 +253,27 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     seeded.sort(key=lambda s: ctx.penalised_bic(s[1]))
     log(f"  {len(seeded)} splits fitted from their seeds ({time.perf_counter() - t:.1f} s)"
         + (f"; best {seeded[0][0].candidate.how}: cost {seeded[0][1].cost:.4g}" if seeded else ""), ctx.progress)
-    t = time.perf_counter()
     best = None
-    for (um, first), res in zip(seeded, shared_map(_split_refined, [(ctx, first, effects) for _, first in seeded])):
-        if res is None:
+    for um, first in seeded[:SPLIT_REFINED]:
+        t = time.perf_counter()
+        try:
+            again = ctx.fit(first.fitted_circuit(), effects, couplings=first.couplings_freed)
+            res = fit_multistart(again, starts=SPLIT_STARTS, good_enough=NOISE_MARGIN * ctx.floor, floor=ctx.floor,
+                                 x0=np.concatenate([np.zeros(again.nc), first.x[again.nc:]]))
+            # splits of one winding fit within a few tens of per cent of the floor alike, and what tells them apart
+            # is the last of their misfit: the modes moved onto every misfit the noise does not account for
+            # (:func:`.realign.misfits`), not only until the objective is within NOISE_MARGIN of the floor
+            res = realigned(again, res, ctx.floor, 0.0)
+        except CANDIDATE_FAILURES:
             continue
         res.structure = um.candidate.how + (" (from the design values)" if from_design else "")
         res.unmerged = um
         res.causes = [c for c in base.causes if c not in ("none", "missing-section")] + ["missing-section"]
         res.cause = "+".join(res.causes)
+        log(f"  {um.candidate.how}: cost {res.cost:.4g} ({time.perf_counter() - t:.1f} s)", ctx.progress)
         if best is None or ctx.penalised_bic(res) < ctx.penalised_bic(best):
             best = res
-    if best is not None:
-        log(f"  {len(seeded)} splits refined ({time.perf_counter() - t:.1f} s); best {best.structure}: cost "
-            f"{best.cost:.4g}", ctx.progress)
     return best
-
-
-def _split_refined(args: tuple[Context, FitResult, Sequence[Effect]]) -> FitResult | None:
-    """A seeded split (:func:`_split_seeded`) fitted again through smoothed errors and from ``SPLIT_STARTS`` random
-    starts around it (:func:`.baseline.fit_multistart`), its modes then moved onto what the noise does not account
-    for (:func:`.realign.realigned`), or the seeded fit itself when its BIC (merged halves penalised) is the lower;
-    None when the fit fails."""
-    from estimation.diagnosis.baseline import fit_multistart
-
-    ctx, first, effects = args
-    try:
-        again = ctx.fit(first.fitted_circuit(), effects, couplings=first.couplings_freed)
-        res = fit_multistart(again, starts=SPLIT_STARTS, good_enough=NOISE_MARGIN * ctx.floor, floor=ctx.floor,
-                             x0=np.concatenate([np.zeros(again.nc), first.x[again.nc:]]))
-        # splits of one winding fit within a few tens of per cent of the floor alike, and what tells them apart
-        # is the last of their misfit: the modes moved onto every misfit the noise does not account for
-        # (:func:`.realign.misfits`), not only until the objective is within NOISE_MARGIN of the floor
-        res = realigned(again, res, ctx.floor, 0.0)
-    except CANDIDATE_FAILURES:
-        return None
-    # the fit through smoothed errors can leave the seeded fit's basin for a worse one: a refit ends no worse than
-    # where it started
-    res.unmerged = first.unmerged
-    return res if ctx.penalised_bic(res) <= ctx.penalised_bic(first) else first
 
 
 def every_section_split(ctx: Context, base: FitResult, ports: Sequence[str]) -> FitResult | None:
