@@ -318,11 +318,11 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # (:func:`_drift_answer`), else after it
     split_searched = False
 
-    def every_split() -> None:
+    def every_split(drift_bic: float = np.inf) -> None:
         nonlocal split_searched
         if (split_searched or not (ctx.one_port and ctx.nominal is not None and "missing-section" in todo and passes)
                 or not (ctx.unfit(baseline) or ctx.distorted(baseline) or not ctx.within_design(baseline))
-                or _explained_within_design(ctx, results)):
+                or _explained_within_design(ctx, results, drift_bic)):
             return
         split_searched = True
         t = time.perf_counter()
@@ -340,6 +340,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     baseline, group_entry, answered, located_on = _drift_answer(ctx, baseline, group, results, failed, None,
                                                                  bool(passes), every_split)
     prior = ctx.prior
+    weighed = results  # what a drift answer was weighed against, counting its located value alone (weighed again)
     if answered:
         results, passes = {}, 0
     every_split()
@@ -452,9 +453,12 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             baseline, group_entry = alone, None
             ctx.prior = prior = prior_before
             on_top, relaxed = relaxed_drift(ctx, baseline, lambda m: log(m, progress))
-    if prior is not None and not chosen and on_top and group_entry is None and results:
-        named = cause_over_drift(ctx, relaxed, on_top, results)
+    if prior is not None and not chosen and on_top and group_entry is None and (results or weighed):
+        # a drift taken as the answer (``weighed``) was weighed with its located value alone counted; every value
+        # reported is a parameter of the answer, and the causes are weighed again against it whole
+        named = cause_over_drift(ctx, relaxed, on_top, results or weighed)
         if named is not None:
+            results = results or weighed
             extended = current = named
             chosen = list(named.causes or [named.cause])
             steps = [{"cause": chosen[-1], "gain": 1 - named.objective / baseline.objective,
@@ -462,7 +466,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                       "total_gain": 1 - named.objective / baseline.objective, "model": named.structure}]
             on_top, relaxed = relaxed_drift(ctx, named, lambda m: log(m, progress))
         elif getattr(relaxed, "cause_tie", None):  # a cause barely told from the drift: reported beside it
-            baseline.cause_ties = list(getattr(baseline, "cause_ties", [])) + relaxed.cause_tie
+            said = {t["cause"] for t in relaxed.cause_tie}  # weighed whole, in the place of its entry as one value
+            baseline.cause_ties = [t for t in getattr(baseline, "cause_ties", []) if t["cause"] not in said] + \
+                relaxed.cause_tie
     if (prior is not None and not chosen and not on_top and group_entry is None and ctx.drift(baseline)
             and ctx.within_design(baseline) and baseline.boxed is not None and ctx.explained(baseline.boxed)):
         baseline = baseline.boxed  # ``none``: the model returned has every value within the tolerance
@@ -711,7 +717,7 @@ def _polish_baseline(ctx: Context, baseline: FitResult, fits, progress: bool) ->
 
 def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, results: dict[str, FitResult],
                   failed: list[dict[str, Any]], located_on: FitResult | None, search: bool,
-                  structures: Callable[[], None] = lambda: None
+                  structures: Callable[[float], None] = lambda bic: None
                   ) -> tuple[FitResult, dict[str, Any] | None, bool, FitResult | None]:
     """A group's drift, then one value off the design, weighed against every cause in ``results`` by BIC.
 
@@ -725,8 +731,8 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
 
     A drift is taken as the answer on the best fit of every rival: when it is open (its model does not explain
     the data, or a new section's fit comes within ``DRIFT_MIN_DBIC`` of it), ``structures`` (the search of every
-    section split, which adds its best to ``results``; it runs when no cause explains the data within the design)
-    runs first and the drift is weighed again.
+    section split, which adds its best to ``results``; it runs when no cause explains the data within the design
+    with a BIC no higher than the drift's, given to it) runs first and the drift is weighed again.
 
     Returns
     -------
@@ -750,7 +756,7 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
     if group is not None:
         g_bic = group[0].bic + np.log(group[0].n_residuals)
         if _open(ctx, group[0], g_bic, results, group[1]):
-            structures()
+            structures(g_bic)
         rival = min(results.values(), key=lambda r: r.bic) if results else None
         if rival is None or g_bic < rival.bic:
             log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: BIC below every single cause's"
@@ -771,7 +777,7 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
         return baseline, None, False, baseline
     o_bic = one.bic + np.log(one.n_residuals)
     if _open(ctx, one, o_bic, results):
-        structures()
+        structures(o_bic)
     rival = min(results.values(), key=lambda r: r.bic)
     if o_bic < rival.bic:
         log(f"{one.freed} off the design: BIC below every single cause's ({rival.cause}: "
@@ -812,17 +818,24 @@ def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResu
     return drift.objective > NOISE_MARGIN * ctx.floor or bool(others)
 
 
-def _explained_within_design(ctx: Context, results: dict[str, FitResult]) -> bool:
+def _explained_within_design(ctx: Context, results: dict[str, FitResult], drift_bic: float = np.inf) -> bool:
     """The cause of ``results`` with the lowest BIC among those that fit to the noise floor
     (:meth:`.context.Context.explained`) needs no value beyond the tolerance
-    (:meth:`.context.Context.within_design`): the data are explained within the design, and no structure is sought.
+    (:meth:`.context.Context.within_design`), and a drift weighed against the causes (its BIC ``drift_bic``) is not
+    below it: the data are explained within the design, and no structure is sought. A drift below it is the answer
+    over that cause, and every structure is weighed against the drift first (a six-section winding, 0.52 % noise,
+    section 5 split: the skin effect fits to the noise within the design, Cg6 x3.6 with two more values beyond the
+    tolerance is lower in BIC, and the splits were not searched).
 
     A baseline at the noise whose values the data reject at the tolerance's edge leaves every cause at the noise
     too, each by the same values beyond it: such a cause explains nothing the baseline does not (a split of section 1
     of 8 answered as C1 x1.38: every cause "at the noise", the box rejected by 335 in BIC, the split search not
     run)."""
     fits = [r for r in results.values() if ctx.explained(r)]
-    return bool(fits) and ctx.within_design(min(fits, key=lambda r: r.bic))
+    if not fits:
+        return False
+    best = min(fits, key=lambda r: r.bic)
+    return best.bic <= drift_bic and ctx.within_design(best)
 
 
 def _baseline_refitted(args: tuple[Context, Circuit, int]) -> FitResult | None:

@@ -196,6 +196,20 @@ def test_a_split_is_weighed_by_bic_not_by_its_cost_alone(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_drift_that_beats_a_cause_within_the_design_is_weighed_against_every_split(tmp_path):
+    """Draw 1396 of the untouched seeds 1300-1399 (six sections, 0.52 % noise): section 5 is two sections. The skin
+    effect fits to the noise within the design, so no split was searched; Cg6 x3.6, with C5 and Cg4 beyond the
+    tolerance as well, is lower in BIC than every cause and was the answer with nothing beside it. A drift that beats
+    the cause within the design is weighed against every split, each value it reports a parameter: the split fits
+    as well (lower in BIC, but moving a value far off), and is reported beside the drift."""
+    case = draw(1396)
+    assert case.effect == "split" and case.extra["split"] == 5
+    d = _diagnose(case, tmp_path)
+    assert not d.causes and "missing-section" in {a["cause"] for a in d.cause_alternatives}, \
+        (d.cause, d.drift, d.cause_alternatives)
+
+
+@pytest.mark.slow
 @pytest.mark.long
 def test_a_value_off_is_sought_from_random_starts_when_a_section_fits_lower(tmp_path):
     """Draw 1234 (ten sections, 0.38 % noise): L9 alone at 2.26x its design. The noise floor is estimated 11 % above
