@@ -73,12 +73,18 @@ class Context:
     #: The best fit of each value the one-value search freed (:func:`.drift.located_drift`), by name, as a start of
     #: that value's later fits: (objective, effect labels, couplings, values, effect parameters, BIC).
     located: dict[str, tuple] = field(default_factory=dict)
+    #: ``-2 ln`` of the prior share of one alternative of a cause, by cause (BIC units), added to the BIC of every
+    #: fit naming it (:attr:`.fit.FitResult.cause_prior`): a missing section may be any of the places the search
+    #: weighs (:func:`.causes.section_fits.structure_prior`), and its best fit's BIC alone counts the evidence of
+    #: the best place as that of the cause.
+    cause_prior: dict[str, float] = field(default_factory=dict)
 
     def fit(self, circuit: Circuit, effects: Sequence[Effect] = (), fixed: Sequence[str] = (),
             prior: DesignPrior | None | str = "same", couplings: Sequence[str] = ()) -> FrequencyFit:
         """The fit of ``circuit`` with ``effects`` (``couplings``: K elements fitted too, see :class:`.fit.FrequencyFit`)."""
         return FrequencyFit(circuit, self.configs, self.f, self.data, tuple(self.fixed) + tuple(fixed), effects,
-                            self.scale, self.prior if isinstance(prior, str) else prior, couplings, self.weights)
+                            self.scale, self.prior if isinstance(prior, str) else prior, couplings, self.weights,
+                            self.cause_prior)
 
     def drift(self, r: FitResult, prior: DesignPrior | None = None) -> list[dict[str, Any]]:
         """Values of ``r`` moved beyond the design tolerance (none without a prior); under ``prior`` when given (a

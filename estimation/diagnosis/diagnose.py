@@ -101,7 +101,7 @@ from estimation.diagnosis.causes.realise import realise_extended
 from estimation.diagnosis.causes.rivals import CAUSE_TIE_DBIC, cause_over_drift, ties, whole_answer
 from estimation.diagnosis.report import parallel_note
 from estimation.diagnosis.result import Diagnosis
-from estimation.diagnosis.causes.section_fits import (every_section_split, section_pairs,
+from estimation.diagnosis.causes.section_fits import (every_section_split, section_pairs, structure_prior,
     split_every_section)
 from estimation.diagnosis.causes.single import single_causes, start_tails
 from estimation.diagnosis.causes.unmerge import missing_modes, resolved_points
@@ -256,6 +256,8 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     ctx.prior = prior
     ctx.weights = weights
     ctx.resolved = resolved_points(sd)
+    # a missing section is one of the places the search weighs: each has its share of the cause's prior
+    ctx.cause_prior["missing-section"] = structure_prior(model.circuit, configuration_ports(configs))
     if prior is not None:
         moved = ctx.drift(baseline)
         log(f"design prior: tolerance {prior.tolerance:g}; baseline moved {len(moved)} value(s) beyond it"
@@ -332,7 +334,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             results["missing-section"] = wide
             failed[:] = [x for x in failed if x["cause"] != "missing-section"]
             log(f"missing-section (every split): {wide.structure}: cost {wide.cost:.4g}, gain "
-                 f"{1 - wide.cost / baseline.cost:.3f}, dBIC {baseline.bic - wide.bic:.1f} "
+                 f"{1 - wide.cost / baseline.cost:.3f}, dBIC {baseline.cause_bic - wide.cause_bic:.1f} "
                  f"({time.perf_counter() - t:.1f} s)", progress)
 
     # ---- the group's drift, then one value off the design, weighed against every single cause
@@ -368,13 +370,14 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     # ---- pairs: a missing section and a continuous effect fitted together, when no single cause is enough
     pool = dict(results)
     if ("missing-section" in todo and max_causes >= 2 and ctx.unfit(baseline)
-            and not any(significant(baseline.bic, baseline.objective, r.bic, r.objective, min_delta_bic, min_gain)
-                        for r in results.values())):
+            and not any(significant(baseline.cause_bic, baseline.objective, r.cause_bic, r.objective, min_delta_bic,
+                                    min_gain) for r in results.values())):
         pool.update(section_pairs(ctx, results, baseline))
         # one-port data: every section split beside the effect that does best alone (its parameters free too)
-        effects_alone = [r for c, r in results.items() if c not in STRUCTURAL and r.effects and r.bic < baseline.bic]
+        effects_alone = [r for c, r in results.items()
+                         if c not in STRUCTURAL and r.effects and r.cause_bic < baseline.cause_bic]
         if ctx.one_port and ctx.nominal is not None and effects_alone:
-            single = min(effects_alone, key=lambda r: r.bic)
+            single = min(effects_alone, key=lambda r: r.cause_bic)
             t = time.perf_counter()
             log(f"missing-section: every section split beside {single.cause}", progress)
             pair = split_every_section(ctx, single, configuration_ports(configs), from_design=ctx.distorted(single))
@@ -382,7 +385,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
                                                                                 if c == pair.cause]):
                 pool[pair.cause] = pair
                 log(f"pair {pair.cause} (every split): {pair.structure}: cost {pair.cost:.4g}, gain "
-                    f"{1 - pair.objective / baseline.objective:.3f}, dBIC {baseline.bic - pair.bic:.1f} "
+                    f"{1 - pair.objective / baseline.objective:.3f}, dBIC {baseline.cause_bic - pair.cause_bic:.1f} "
                     f"({time.perf_counter() - t:.1f} s)", progress)
 
     # ---- forward selection, then a backward check; a section named with other causes is checked against the
@@ -402,18 +405,21 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             # BIC at the noise floor (both fit to the noise: what the section adds to the fit is noise)
             # a BIC lower by less than CAUSE_TIE_DBIC is a tie ("not worth more than a bare mention"): it does not
             # overturn the selection, and the causes without the section are reported beside it
-            if (alt[1] and alt[0].bic < current.bic - CAUSE_TIE_DBIC
+            if (alt[1] and alt[0].cause_bic < current.cause_bic - CAUSE_TIE_DBIC
                     and (alt[0].cost <= current.cost or ctx.settled(alt[0]))):
-                log(f"{', '.join(alt[1])} without the section: BIC lower by {current.bic - alt[0].bic:.1f} "
-                     f"than {', '.join(chosen)}, cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against "
+                log(f"{', '.join(alt[1])} without the section: BIC lower by "
+                    f"{current.cause_bic - alt[0].cause_bic:.1f} "
+                    f"than {', '.join(chosen)}, cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against "
                      f"{current.cost:.4g} + {current.penalty:.4g}: kept", progress)
                 current, chosen, steps = alt
                 failed += alt_failed
             else:
-                if alt[1] and abs(alt[0].bic - current.bic) < CAUSE_TIE_DBIC:
-                    section_tie = [{"cause": " + ".join(alt[1]), "delta_bic": float(alt[0].bic - current.bic)}]
-                log(f"without the section ({', '.join(alt[1]) or 'none'}): BIC {alt[0].bic - current.bic:+.1f}, "
-                     f"cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against {current.cost:.4g} + {current.penalty:.4g}: the "
+                if alt[1] and abs(alt[0].cause_bic - current.cause_bic) < CAUSE_TIE_DBIC:
+                    section_tie = [{"cause": " + ".join(alt[1]),
+                                    "delta_bic": float(alt[0].cause_bic - current.cause_bic)}]
+                log(f"without the section ({', '.join(alt[1]) or 'none'}): BIC "
+                    f"{alt[0].cause_bic - current.cause_bic:+.1f}, "
+                    f"cost {alt[0].cost:.4g} + {alt[0].penalty:.4g} against {current.cost:.4g} + {current.penalty:.4g}: the "
                      "section stays", progress)
     extended = current if chosen else None
     # ---- a value of the design really off: one value freed may explain what the prior's spread-out fit leaves
@@ -462,7 +468,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
             extended = current = named
             chosen = list(named.causes or [named.cause])
             steps = [{"cause": chosen[-1], "gain": 1 - named.objective / baseline.objective,
-                      "delta_bic": baseline.bic - named.bic, "cost": named.cost, "penalty": named.penalty,
+                      "delta_bic": baseline.cause_bic - named.cause_bic, "cost": named.cost, "penalty": named.penalty,
                       "total_gain": 1 - named.objective / baseline.objective, "model": named.structure}]
             on_top, relaxed = relaxed_drift(ctx, named, lambda m: log(m, progress))
         elif getattr(relaxed, "cause_tie", None):  # a cause barely told from the drift: reported beside it
@@ -472,7 +478,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if (prior is not None and not chosen and not on_top and group_entry is None and ctx.drift(baseline)
             and ctx.within_design(baseline) and baseline.boxed is not None and ctx.explained(baseline.boxed)):
         baseline = baseline.boxed  # ``none``: the model returned has every value within the tolerance
-    cands = sorted(results.values(), key=lambda r: r.bic)
+    cands = sorted(results.values(), key=lambda r: r.cause_bic)
     diag = Diagnosis(chosen[0] if chosen else "none", baseline, extended, cands, f, data, causes=chosen, steps=steps,
                      noise=floor, failed=failed)
     final = extended or baseline
@@ -486,9 +492,9 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if not chosen:  # a drift that explains the data, and the causes it is barely told from
         diag.cause_alternatives = list(getattr(baseline, "cause_ties", []))
     if first is not None:
-        diag.cause_alternatives = [{"cause": r.cause, "delta_bic": float(r.bic - first.bic)} for r in cands
+        diag.cause_alternatives = [{"cause": r.cause, "delta_bic": float(r.cause_bic - first.cause_bic)} for r in cands
                                    if r is not first and r.cause not in chosen and "+" not in r.cause
-                                   and abs(r.bic - first.bic) < CAUSE_TIE_DBIC]
+                                   and abs(r.cause_bic - first.cause_bic) < CAUSE_TIE_DBIC]
         section_tie = section_tie + list(getattr(extended, "drift_tie", []))
         diag.cause_alternatives += [t for t in section_tie if t["cause"] not in
                                     {a["cause"] for a in diag.cause_alternatives}]
@@ -508,7 +514,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if not diag.explained:
         diag.misfit = misfit_sentence(f, final_errors, data, diag.unexplained, final.cost, floor["cost"])
         tried = [r for r in cands if r is not extended]
-        diag.best_tried = min(tried, key=lambda r: r.bic).cause if tried else ""
+        diag.best_tried = min(tried, key=lambda r: r.cause_bic).cause if tried else ""
         if not chosen:
             diag.cause = "unexplained"
         log(("unexplained: " if not chosen else f"{', '.join(chosen)} leave{'s' if len(chosen) == 1 else ''} a misfit: ")
@@ -567,7 +573,7 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
             if ctx.settled(current):
                 log("cost at the noise floor: no further cause", progress)
                 break
-            best = min(pool.values(), key=lambda r: r.bic)
+            best = min(pool.values(), key=lambda r: r.cause_bic)
             need = _share(ctx, current, min_gain if not chosen else min_step_gain)
             # a model that reaches the noise only by moving values far off the design is no explanation: against it, a
             # candidate that reaches the noise within the design, or with fewer values far off (a value really off the
@@ -581,7 +587,7 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
                     and len(ctx.gross(best)) < len(ctx.gross(current)))):
                 need = 0.0
             ref = getattr(best, "reference", current)  # an extension's gain: between converged fits (.causes.extend)
-            if not significant(ref.bic, ref.objective, best.bic, best.objective, min_delta_bic, need):
+            if not significant(ref.cause_bic, ref.objective, best.cause_bic, best.objective, min_delta_bic, need):
                 break
             new_causes = [c for c in best.causes if c not in chosen]
             new_cause = new_causes[-1] if any(c in STRUCTURAL for c in new_causes) and len(new_causes) > 1 else \
@@ -636,12 +642,12 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
                     continue
             for other in new_causes[:-1] if len(new_causes) > 1 else []:  # a pair: the effect named with the section
                 steps.append({"cause": other, "joint": True, "gain": 1 - best.objective / ref.objective,
-                              "delta_bic": ref.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
+                              "delta_bic": ref.cause_bic - best.cause_bic, "cost": best.cost, "penalty": best.penalty,
                               "total_gain": 1 - best.objective / baseline.objective, "model": best.structure})
                 chosen.append(other)
             new_cause = new_causes[-1]
             steps.append({"cause": new_cause, "gain": 1 - best.objective / ref.objective,
-                          "delta_bic": ref.bic - best.bic, "cost": best.cost, "penalty": best.penalty,
+                          "delta_bic": ref.cause_bic - best.cause_bic, "cost": best.cost, "penalty": best.penalty,
                           "total_gain": 1 - best.objective / baseline.objective,
                           "model": best.structure + ("; " if best.structure and best.effects else "")
                           + ", ".join(e.label for e in best.effects)})
@@ -662,7 +668,7 @@ def _select(ctx: Context, baseline: FitResult, pool: dict[str, FitResult], resul
             n_named = len(chosen)
             current, chosen, steps = _drop_redundant(ctx, current, chosen, steps, min_delta_bic, progress)
             if len(chosen) < n_named:  # the order forward selection gives the causes kept: by their single fits
-                chosen.sort(key=lambda c: results[c].bic if c in results else np.inf)
+                chosen.sort(key=lambda c: results[c].cause_bic if c in results else np.inf)
         swaps = []
         if chosen and current.effects and not ctx.settled(current):  # each cause's form against all the others
             current, swaps = rechoose_forms(ctx, current, min_delta_bic, _CANDIDATE_FAILURES,
@@ -749,25 +755,26 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
         # moves its group's mean beyond the tolerance too, and the lower BIC of the two tells which it is
         one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress), rival)
         located_on = baseline
-        if one is not None and one.bic < group[0].bic:
+        if one is not None and one.cause_bic < group[0].cause_bic:
             log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {one.freed} alone off the design has a BIC lower by "
-                f"{group[0].bic - one.bic:.1f}: not the group", progress)
+                f"{group[0].cause_bic - one.cause_bic:.1f}: not the group", progress)
             group = None
     if group is not None:
-        g_bic = group[0].bic + np.log(group[0].n_residuals)
+        g_bic = group[0].cause_bic + np.log(group[0].n_residuals)
         if _open(ctx, group[0], g_bic, results, group[1]):
             structures(g_bic)
-        rival = min(results.values(), key=lambda r: r.bic) if results else None
-        if rival is None or g_bic < rival.bic:
+        rival = min(results.values(), key=lambda r: r.cause_bic) if results else None
+        if rival is None or g_bic < rival.cause_bic:
             log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: BIC below every single cause's"
-                + (f" ({rival.cause}: {rival.bic - g_bic:.1f} higher)" if rival else "") + ": the group's drift "
+                + (f" ({rival.cause}: {rival.cause_bic - g_bic:.1f} higher)" if rival else "") + ": the group's drift "
                 "explains the data, no cause", progress)
             ctx.prior = group[1]
             failed += [{"cause": c, "cost": r.cost, "reason": "the drift of a group explains the data with a lower BIC"}
                        for c, r in results.items()]
             group[0].cause_ties = ties(results, g_bic)
             return group[0], group[2], True, located_on
-        log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {rival.cause} has a BIC lower by {g_bic - rival.bic:.1f}:"
+        log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {rival.cause} has a BIC lower by "
+            f"{g_bic - rival.cause_bic:.1f}:"
             " not reported", progress)
     if ctx.prior is None or not search or not results or (ctx.explained(baseline) and ctx.within_design(baseline)):
         return baseline, None, False, located_on
@@ -775,18 +782,18 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
         one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress), rival)
     if one is None:
         return baseline, None, False, baseline
-    o_bic = one.bic + np.log(one.n_residuals)
+    o_bic = one.cause_bic + np.log(one.n_residuals)
     if _open(ctx, one, o_bic, results):
         structures(o_bic)
-    rival = min(results.values(), key=lambda r: r.bic)
-    if o_bic < rival.bic:
+    rival = min(results.values(), key=lambda r: r.cause_bic)
+    if o_bic < rival.cause_bic:
         log(f"{one.freed} off the design: BIC below every single cause's ({rival.cause}: "
-            f"{rival.bic - o_bic:.1f} higher): the value's drift explains the data, no cause", progress)
+            f"{rival.cause_bic - o_bic:.1f} higher): the value's drift explains the data, no cause", progress)
         failed += [{"cause": c, "cost": r.cost, "reason": "the drift of one value explains the data with a lower BIC"}
                    for c, r in results.items()]
         one.cause_ties = ties(results, o_bic)
         return one, None, True, baseline
-    log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.bic:.1f}: set aside",
+    log(f"{one.freed} off the design: {rival.cause} has a BIC lower by {o_bic - rival.cause_bic:.1f}: set aside",
         progress)
     one.answer_bic = float(o_bic)  # weighed again against the selection's answer (:func:`.causes.rivals.whole_answer`)
     ctx.drift_aside = one
@@ -811,7 +818,7 @@ def _open(ctx: Context, drift: FitResult, bic: float, results: dict[str, FitResu
     if section is not None:
         # weighed at its own convergence, as the drift's fit is: a split's first fit stops after tens of evaluations
         section = results["missing-section"] = converged(ctx, section, lambda m: log(m, ctx.progress), structure=True)
-    if section is not None and section.bic - bic < DRIFT_MIN_DBIC:
+    if section is not None and section.cause_bic - bic < DRIFT_MIN_DBIC:
         return True
     freed = str(getattr(drift, "freed", "")).lower()
     others = [d for d in ctx.drift(drift, prior) if d["name"].lower() != freed]
@@ -834,8 +841,8 @@ def _explained_within_design(ctx: Context, results: dict[str, FitResult], drift_
     fits = [r for r in results.values() if ctx.explained(r)]
     if not fits:
         return False
-    best = min(fits, key=lambda r: r.bic)
-    return best.bic <= drift_bic and ctx.within_design(best)
+    best = min(fits, key=lambda r: r.cause_bic)
+    return best.cause_bic <= drift_bic and ctx.within_design(best)
 
 
 def _baseline_refitted(args: tuple[Context, Circuit, int]) -> FitResult | None:

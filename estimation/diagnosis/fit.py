@@ -119,6 +119,9 @@ class FitResult:
     penalty, penalty_rss : float
         The design prior's penalty in cost units and in residual-sum units
         (0 without a prior).
+    cause_prior : mapping
+        ``-2 ln`` of the prior share of one alternative of a cause, by cause (BIC units): added to the BIC for
+        each cause in ``causes`` in :attr:`cause_bic` (:attr:`.context.Context.cause_prior`).
     """
 
     cause: str
@@ -142,11 +145,18 @@ class FitResult:
     penalty_rss: float = 0.0
     #: Couplings (K element names) fitted with the values (:class:`FrequencyFit`'s ``couplings``).
     couplings: tuple[str, ...] = ()
+    cause_prior: Mapping[str, float] = field(default_factory=dict, repr=False)
 
     @property
     def bic(self) -> float:
         """Bayesian information criterion ``N ln(RSS/N) + k ln N``, on the cost penalised by the design prior."""
         return bic(self.rss + self.penalty_rss, self.n_residuals, self.n_params)
+
+    @property
+    def cause_bic(self) -> float:
+        """:attr:`bic` plus each named cause's prior share (``cause_prior``): how models with different causes
+        are weighed against each other and against a drift (two fits of one model differ in :attr:`bic` alone)."""
+        return self.bic + sum(self.cause_prior.get(c, 0.0) for c in set(self.causes))
 
     @property
     def objective(self) -> float:
@@ -219,6 +229,9 @@ class FrequencyFit:
     weights : mapping, optional
         Response name to per-point weights ``u_k`` (:func:`.evidence.noise_weights`):
         the residuals, the cost and the residual sum are those of ``u_k e_k``.
+    cause_prior : mapping, optional
+        Cause to ``-2 ln`` of one alternative's prior share (BIC units), given to every result
+        (:attr:`FitResult.cause_prior`).
     """
 
     def __init__(
@@ -233,7 +246,9 @@ class FrequencyFit:
         prior: DesignPrior | None = None,
         couplings: Sequence[str] = (),
         weights: Mapping[str, np.ndarray] | None = None,
+        cause_prior: Mapping[str, float] | None = None,
     ):
+        self.cause_prior = cause_prior if cause_prior is not None else {}
         self.effects = list(effects)
         self.configurations = list(configurations)
         self.ports = configuration_ports(self.configurations)
@@ -747,5 +762,5 @@ class FrequencyFit:
             cost=cost, rss=rss, n_residuals=n_res, n_params=self.nc + len(self.extra),
             predicted=pred, errors=err, nfev=nfev, wall_s=wall, causes=causes, effects=list(self.effects),
             params=params, x=np.asarray(x, float), penalty=penalty, penalty_rss=penalty * self.f.size,
-            couplings=self.couplings,
+            couplings=self.couplings, cause_prior=self.cause_prior,
         )

@@ -74,8 +74,9 @@ class Diagnosis(DiagnosisOutcome):
         rows = []
         for r in self.fits:
             rows.append({
-                "cause": r.cause, "cost": r.cost, "gain": max(0.0, 1 - r.objective / self.baseline.objective), "bic": r.bic,
-                "delta_bic": self.baseline.bic - r.bic, "n_params": r.n_params, "extra": r.extra,
+                "cause": r.cause, "cost": r.cost, "gain": max(0.0, 1 - r.objective / self.baseline.objective),
+                "bic": r.cause_bic,
+                "delta_bic": self.baseline.cause_bic - r.cause_bic, "n_params": r.n_params, "extra": r.extra,
                 "form": r.effects[0].form if r.effects else "", "group": r.effects[0].group if r.effects else "",
                 "formula": r.describe()[0]["formula"] if r.effects else r.structure, "wall_s": r.wall_s,
             })

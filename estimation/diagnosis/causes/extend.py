@@ -45,7 +45,7 @@ def extensions(ctx: Context, current: FitResult, causes: Sequence[str], results:
         res.reference = reference
         pool[cause] = res
         log(f"  + {cause}: cost {res.cost:.4g}, gain {1 - res.objective / reference.objective:.3f}, "
-             f"dBIC {reference.bic - res.bic:.1f} ({seconds:.1f} s)", ctx.progress)
+             f"dBIC {reference.cause_bic - res.cause_bic:.1f} ({seconds:.1f} s)", ctx.progress)
     return pool
 
 

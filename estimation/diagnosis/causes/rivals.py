@@ -31,7 +31,7 @@ def whole_answer(ctx: Context, aside: FitResult, final: FitResult, chosen: list[
     what the selection names instead must then beat the drift itself. Returns ``aside`` (its ``cause_ties`` set) when its BIC is the lower, else
     None (``final``'s ``cause_ties`` set when it names no cause: a drift as well)."""
     n = final.n_residuals
-    final_bic = final.bic + np.log(n) * (1 if getattr(final, "freed", None) else 0)
+    final_bic = final.cause_bic + np.log(n) * (1 if getattr(final, "freed", None) else 0)
     said = ", ".join(chosen) or "no cause"
     if aside.answer_bic >= final_bic:
         log(f"{aside.freed} off the design, set aside: {said} has a BIC lower by {aside.answer_bic - final_bic:.1f}",
@@ -66,38 +66,38 @@ def cause_over_drift(ctx: Context, relaxed: FitResult, on_top: list[dict[str, An
         if r is not results[c]:
             log(f"  {c} refitted to convergence: {results[c].objective:.4g} -> {r.objective:.4g}", ctx.progress)
             results[c] = r
-    drift_bic = relaxed.bic + len(on_top) * np.log(relaxed.n_residuals)
+    drift_bic = relaxed.cause_bic + len(on_top) * np.log(relaxed.n_residuals)
     names = ", ".join(d["name"] for d in on_top)
     rivals = [r for r in results.values() if ctx.explained(r)]
     if not rivals:
         # a cause at the noise that moves a value of the design far off is not named over the drift, but with a BIC
         # no worse than the drift's by CAUSE_TIE_DBIC the data do not tell it from the drift: it is reported beside it
         near = [r for r in results.values() if r.objective <= NOISE_MARGIN * ctx.floor
-                and r.bic - drift_bic < CAUSE_TIE_DBIC]
+                and r.cause_bic - drift_bic < CAUSE_TIE_DBIC]
         if near:
-            best = min(near, key=lambda r: r.bic)
-            log(f"{best.cause} fits to the noise with a BIC {best.bic - drift_bic:+.1f} against {names} off the "
+            best = min(near, key=lambda r: r.cause_bic)
+            log(f"{best.cause} fits to the noise with a BIC {best.cause_bic - drift_bic:+.1f} against {names} off the "
                 f"design, but moves {', '.join(d['name'] for d in ctx.gross(best))} far off: reported beside the drift",
                 ctx.progress)
-            relaxed.cause_tie = [{"cause": best.cause, "delta_bic": float(best.bic - drift_bic)}]
+            relaxed.cause_tie = [{"cause": best.cause, "delta_bic": float(best.cause_bic - drift_bic)}]
         return None
-    best = min(rivals, key=lambda r: r.bic)
-    if best.bic >= drift_bic:
-        log(f"{names} off the design: BIC {best.bic - drift_bic:.1f} below {best.cause}, the best cause that explains "
-            "the data", ctx.progress)
-        if best.bic - drift_bic < CAUSE_TIE_DBIC:
-            relaxed.cause_tie = [{"cause": best.cause, "delta_bic": float(best.bic - drift_bic)}]
+    best = min(rivals, key=lambda r: r.cause_bic)
+    if best.cause_bic >= drift_bic:
+        log(f"{names} off the design: BIC {best.cause_bic - drift_bic:.1f} below {best.cause}, the best cause that "
+            "explains the data", ctx.progress)
+        if best.cause_bic - drift_bic < CAUSE_TIE_DBIC:
+            relaxed.cause_tie = [{"cause": best.cause, "delta_bic": float(best.cause_bic - drift_bic)}]
         return None
-    log(f"{best.cause} explains the data with a BIC lower by {drift_bic - best.bic:.1f} than {names} off the design "
-        "(each counted): named", ctx.progress)
-    best.drift_tie = ([{"cause": f"drift of {names}", "delta_bic": float(drift_bic - best.bic)}]
-                      if drift_bic - best.bic < CAUSE_TIE_DBIC else [])
+    log(f"{best.cause} explains the data with a BIC lower by {drift_bic - best.cause_bic:.1f} than {names} off the "
+        "design (each counted): named", ctx.progress)
+    best.drift_tie = ([{"cause": f"drift of {names}", "delta_bic": float(drift_bic - best.cause_bic)}]
+                      if drift_bic - best.cause_bic < CAUSE_TIE_DBIC else [])
     return best
 
 
 def ties(results: dict[str, FitResult], drift_bic: float) -> list[dict[str, Any]]:
     """The single causes whose BIC is within ``CAUSE_TIE_DBIC`` of a drift that explains the data (``cause``,
     ``delta_bic``): the data tell the drift only barely from them."""
-    ranked = sorted(results.values(), key=lambda r: r.bic)
-    return [{"cause": r.cause, "delta_bic": float(r.bic - drift_bic)} for r in ranked
-            if r.bic - drift_bic < CAUSE_TIE_DBIC]
+    ranked = sorted(results.values(), key=lambda r: r.cause_bic)
+    return [{"cause": r.cause, "delta_bic": float(r.cause_bic - drift_bic)} for r in ranked
+            if r.cause_bic - drift_bic < CAUSE_TIE_DBIC]

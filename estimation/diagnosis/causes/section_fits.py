@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from pris_cosim.circuits.circuit import Circuit
+
 from estimation.diagnosis.align import aligned_start
 from estimation.diagnosis.causes.catalogue import Effect
 from estimation.diagnosis.context import NOISE_MARGIN, STRUCTURAL, STRUCTURAL_FLOOR, WIDE_SEED_NFEV, Context, log
@@ -19,7 +21,7 @@ from estimation.diagnosis.cores import shared_map
 from estimation.diagnosis.realign import realigned
 from estimation.diagnosis.fit import (CANDIDATE_FAILURES, WIDE_CONTINUATION, WIDER_CONTINUATION, FitResult,
     FrequencyFit, configuration_ports, current_nc)
-from estimation.diagnosis.causes.sections import section_candidates
+from estimation.diagnosis.causes.sections import find_chains, section_candidates
 from estimation.diagnosis.causes.unmerge import Unmerged, missing_modes, search_unmerged
 
 
@@ -60,19 +62,17 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
                 res.unmerged = Unmerged(*cand.split_of)
             except CANDIDATE_FAILURES:
                 pass
-        res.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"] if effects else \
-            ["missing-section"]
-        res.cause = "+".join(res.causes)
+        _named(res, base)
         if best is None or ctx.penalised_bic(res) < ctx.penalised_bic(best):
             best = res
     # a missing section alone (no cause named yet): the design's sections split with their couplings free
     if not effects and ctx.nominal is not None and (ctx.unfit(base)
                                                     or ctx.distorted(base)):
         split = _split_nominal(ctx, effects, tail, ports)
+        if split is not None:
+            _named(split, base)
         if split is not None and (best is None or ctx.penalised_bic(split) < ctx.penalised_bic(best)):
             best = split
-            best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
-            best.cause = "+".join(best.causes)
     if ctx.nominal is not None and (ctx.unfit(base) or ctx.distorted(base)
                                     or missing_modes(ctx.f, ctx.data, base.predicted, ctx.resolved) > 0):
         found = search_unmerged(lambda c, k: ctx.fit(c, effects, couplings=k), ctx.f, ctx.data, ctx.nominal, ports,
@@ -81,13 +81,35 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
                                 good_enough=NOISE_MARGIN * STRUCTURAL_FLOOR * ctx.floor)
         if found is not None:
             found[0].unmerged = found[1]  # ranked with its halves merged back (:meth:`.Context.penalised`)
+            _named(found[0], base)
         if found is not None and (best is None or ctx.penalised_bic(found[0]) < ctx.penalised_bic(best)):
             best, um, merged = found
             best.structure = um.candidate.how
             best.merged_back = {**merged.values, **um.merged_back(merged.fitted_circuit())}
-            best.causes = [c for c in base.causes if c != "missing-section"] + ["missing-section"]
-            best.cause = "+".join(best.causes)
     return best
+
+
+def _named(res: FitResult, base: FitResult) -> None:
+    """``res``, a fit of a missing section on ``base``, given its causes: ``base``'s and the missing section (its
+    BIC then counts the section's prior share, :attr:`.context.Context.cause_prior`, as every candidate's it is
+    ranked against)."""
+    res.causes = [c for c in base.causes if c not in ("none", "missing-section")] + ["missing-section"]
+    res.cause = "+".join(res.causes)
+
+
+def structure_prior(circuit: Circuit, ports: Sequence[str]) -> float:
+    """``2 ln M`` (BIC units) for the ``M`` places a section may be missing from ``circuit``: each section of
+    each winding split, and each winding lengthened at either end.
+
+    The search for a missing section weighs every place and keeps the best, so the
+    cause's prior is shared among them: each place has ``1/M`` of it, and the best
+    place's BIC plus ``2 ln M`` is that cause's (its evidence when one place
+    dominates; the sum over the places is never below it). Without the share the
+    best of ``M`` places fitted to the noise alone gains the maximum of ``M``
+    draws, about ``2 ln M`` in BIC (ten sections, 4.8).
+    """
+    places = sum(len(ch.sections) + 2 for ch in find_chains(circuit, ports))
+    return 2.0 * float(np.log(max(places, 1)))
 
 
 def _new_elements_fitted(args: tuple[Context, Any, Sequence[Effect], np.ndarray]) -> FitResult | None:
@@ -241,7 +263,6 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
     where the misfit seemed to sit.
     """
     from estimation.diagnosis.baseline import fit_multistart
-    from estimation.diagnosis.causes.sections import find_chains
 
     circuit = ctx.nominal if from_design and ctx.nominal is not None else base.fitted_circuit()
     effects = list(base.effects)
@@ -268,8 +289,7 @@ def split_every_section(ctx: Context, base: FitResult, ports: Sequence[str], fro
             continue
         res.structure = um.candidate.how + (" (from the design values)" if from_design else "")
         res.unmerged = um
-        res.causes = [c for c in base.causes if c not in ("none", "missing-section")] + ["missing-section"]
-        res.cause = "+".join(res.causes)
+        _named(res, base)
         log(f"  {um.candidate.how}: cost {res.cost:.4g} ({time.perf_counter() - t:.1f} s)", ctx.progress)
         if best is None or ctx.penalised_bic(res) < ctx.penalised_bic(best):
             best = res

@@ -237,6 +237,7 @@ def single_causes(ctx: Context, todo: Sequence[str], baseline: FitResult, progre
             continue
         results[cause] = res
         log(f"{cause}: {res.structure or res.effects[0].label}: cost {res.cost:.4g}, gain "
-            f"{1 - res.cost / baseline.cost:.3f}, dBIC {baseline.bic - res.bic:.1f} ({time.perf_counter() - t:.1f} s)",
+            f"{1 - res.cost / baseline.cost:.3f}, dBIC {baseline.cause_bic - res.cause_bic:.1f} "
+            f"({time.perf_counter() - t:.1f} s)",
             progress)
     return results, failed, variants_tried
