@@ -462,7 +462,7 @@ def _diagnose(frequency_hz, measured, model, circuit, port, min_delta_bic, min_g
     if prior is not None and not chosen and on_top and group_entry is None and (results or weighed):
         # a drift taken as the answer (``weighed``) was weighed with its located value alone counted; every value
         # reported is a parameter of the answer, and the causes are weighed again against it whole
-        named = cause_over_drift(ctx, relaxed, on_top, results or weighed)
+        named = cause_over_drift(ctx, relaxed, on_top, results or weighed, min_delta_bic)
         if named is not None:
             results = results or weighed
             extended = current = named
