@@ -158,7 +158,8 @@ def write_report(diag: Diagnosis, directory: str | Path, source: str = "") -> Pa
     elif tie and data.get("drift"):
         lines += ["The data tell the drift above only barely from "
                   + ", ".join(f"`{c['cause']}` (BIC {c['delta_bic']:+.1f})" for c in tie)
-                  + ": less than 2 in BIC, not worth more than a bare mention.", ""]
+                  + ": a cause is named over a drift when it is lower in BIC by 10 (\"very strong\"), and a drift "
+                  "lower by less than 2 is not worth more than a bare mention.", ""]
     if not data.get("explained", True):
         lines += [("No cause tried explains the data" if not data.get("causes") else "The causes named do not explain "
                    "all of the data") + f": the returned model stays above twice the noise floor. {data.get('misfit', '')}"
