@@ -91,8 +91,7 @@ def fit_missing_section(ctx: Context, base: FitResult, effects: Sequence[Effect]
 
 def _named(res: FitResult, base: FitResult) -> None:
     """``res``, a fit of a missing section on ``base``, given its causes: ``base``'s and the missing section (its
-    BIC then counts the section's prior share, :attr:`.context.Context.cause_prior`, as every candidate's it is
-    ranked against)."""
+    :attr:`.fit.FitResult.cause_bic` then counts the section's prior share, :attr:`.context.Context.cause_prior`)."""
     res.causes = [c for c in base.causes if c not in ("none", "missing-section")] + ["missing-section"]
     res.cause = "+".join(res.causes)
 
@@ -103,10 +102,10 @@ def structure_prior(circuit: Circuit, ports: Sequence[str]) -> float:
 
     The search for a missing section weighs every place and keeps the best, so the
     cause's prior is shared among them: each place has ``1/M`` of it, and the best
-    place's BIC plus ``2 ln M`` is that cause's (its evidence when one place
-    dominates; the sum over the places is never below it). Without the share the
-    best of ``M`` places fitted to the noise alone gains the maximum of ``M``
-    draws, about ``2 ln M`` in BIC (ten sections, 4.8).
+    place's BIC plus ``2 ln M`` is that cause's (``-2 ln`` of its evidence when one
+    place dominates, and a bound on it otherwise). Without the share the best of
+    ``M`` places fitted to the noise alone gains the maximum of ``M`` draws, about
+    ``2 ln M`` in BIC over one (twelve places on ten sections, 5.0).
     """
     places = sum(len(ch.sections) + 2 for ch in find_chains(circuit, ports))
     return 2.0 * float(np.log(max(places, 1)))
