@@ -1,4 +1,5 @@
-"""A winding's last section split in two: its start node's capacitance to ground is shared out anew.
+"""A winding's last section split in two: its start node's capacitance to ground is shared out anew; and the
+places a section may be missing from, counted by hand.
 
 The last section of a cascade ends at ground, so its series capacitance is
 a capacitance to ground at its start node, in parallel with the node's own.
@@ -7,11 +8,14 @@ new node puts ``Cs Cg / (Cs + Cg)`` (two capacitors in series) where that
 capacitance was; the closed form is written out here.
 """
 
+import math
+
 import numpy as np
 import pytest
 
 from estimation.diagnosis.fit import FrequencyFit
 from estimation.diagnosis.prior import design_prior
+from estimation.diagnosis.causes.section_fits import structure_prior
 from estimation.diagnosis.causes.sections import coupling_decay, find_chains, split_section
 from estimation.diagnosis.causes.unmerge import Unmerged
 from pris_cosim.frf.response import Response
@@ -93,3 +97,23 @@ def test_first_seed_of_a_split_is_the_plain_split():
     assert np.allclose(rows[0][others], 0.0, atol=1e-12)
     assert rows[0][halves[0]] == pytest.approx(rows[0][halves[1]], abs=1e-12)
     assert not any(np.allclose(r[others], 0.0, atol=1e-12) for r in rows[1:])
+
+
+def test_a_three_section_winding_has_five_places_for_a_missing_section():
+    """Three splits and the winding's two ends: the search weighs five places, and a missing section's BIC counts
+    ``2 ln 5``."""
+    assert math.isclose(structure_prior(parse_netlist(NET), ["n1"]), 2 * math.log(3 + 2))
+
+
+def test_the_cause_bic_adds_the_prior_share_of_each_named_cause_once():
+    c = parse_netlist(NET)
+    f = np.logspace(3, 6, 40)
+    cfg = [Configuration("default", "n1", (), (Response("Zin"),))]
+    share = structure_prior(c, ["n1"])
+    fit = FrequencyFit(c, cfg, f, {"Zin": np.full(f.size, 100.0 + 0j)}, cause_prior={"missing-section": share})
+    r = fit.result(fit.start)
+    assert r.cause_bic == r.bic  # the baseline names no cause
+    r.causes = ["skin-effect", "missing-section"]
+    assert math.isclose(r.cause_bic - r.bic, share)
+    r.causes = ["skin-effect"]  # a cause with a single alternative shares nothing
+    assert r.cause_bic == r.bic
