@@ -73,8 +73,8 @@ class Context:
     #: The best fit of each value the one-value search freed (:func:`.drift.located_drift`), by name, as a start of
     #: that value's later fits: (objective, effect labels, couplings, values, effect parameters, BIC).
     located: dict[str, tuple] = field(default_factory=dict)
-    #: ``-2 ln`` of the prior share of one alternative of a cause, by cause (BIC units), added to the BIC of every
-    #: fit naming it (:attr:`.fit.FitResult.cause_prior`): a missing section may be any of the places the search
+    #: ``-2 ln`` of the prior share of one alternative of a cause, by cause (BIC units), added to the cause BIC of every
+    #: fit naming it (:attr:`.fit.FitResult.cause_bic`): a missing section may be any of the places the search
     #: weighs (:func:`.causes.section_fits.structure_prior`), and its best fit's BIC alone counts the evidence of
     #: the best place as that of the cause.
     cause_prior: dict[str, float] = field(default_factory=dict)
