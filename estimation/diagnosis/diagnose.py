@@ -755,12 +755,12 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
         # moves its group's mean beyond the tolerance too, and the lower BIC of the two tells which it is
         one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress), rival)
         located_on = baseline
-        if one is not None and one.cause_bic < group[0].cause_bic:
+        if one is not None and one.bic < group[0].bic:
             log(f"{group[2]['name']} x{group[2]['ratio']:.3g}: {one.freed} alone off the design has a BIC lower by "
-                f"{group[0].cause_bic - one.cause_bic:.1f}: not the group", progress)
+                f"{group[0].bic - one.bic:.1f}: not the group", progress)
             group = None
     if group is not None:
-        g_bic = group[0].cause_bic + np.log(group[0].n_residuals)
+        g_bic = group[0].bic + np.log(group[0].n_residuals)
         if _open(ctx, group[0], g_bic, results, group[1]):
             structures(g_bic)
         rival = min(results.values(), key=lambda r: r.cause_bic) if results else None
@@ -782,7 +782,7 @@ def _drift_answer(ctx: Context, baseline: FitResult, group: tuple | None, result
         one = located_drift(ctx, baseline, NOISE_MARGIN * ctx.floor, lambda m: log(m, progress), rival)
     if one is None:
         return baseline, None, False, baseline
-    o_bic = one.cause_bic + np.log(one.n_residuals)
+    o_bic = one.bic + np.log(one.n_residuals)
     if _open(ctx, one, o_bic, results):
         structures(o_bic)
     rival = min(results.values(), key=lambda r: r.cause_bic)
