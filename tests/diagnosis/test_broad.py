@@ -144,6 +144,7 @@ def test_one_capacitance_to_ground_off_is_not_the_group(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_value_off_is_reported_alone_not_with_the_one_that_made_up_for_it(tmp_path):
     """Draw 1150 of the benchmark's fixed seeds (six sections, 207 points, 0.76 % noise): L6 alone at 0.46x its
     design. The fit spreads it (L6 0.57x, L4 0.71x), and each passes its own test at the edge with the other's prior
@@ -152,6 +153,7 @@ def test_a_value_off_is_reported_alone_not_with_the_one_that_made_up_for_it(tmp_
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_value_off_is_found_when_a_groups_fit_finds_the_better_optimum(tmp_path):
     """Draw 1124 of the benchmark's fixed seeds (four sections, 915 points, 1.0 % noise): L3 at 1.53x its design.
     The baseline's own fit stops at L3 x1.32 (1.06x the noise floor, so nothing seems wrong); the resistances'
@@ -184,6 +186,7 @@ def test_a_drift_that_leaves_values_off_is_weighed_against_every_split(tmp_path)
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_split_is_weighed_by_bic_not_by_its_cost_alone(tmp_path):
     """Draw 1239 (seven sections, 1.65 % noise): section 2 is two sections, and the baseline reaches 1.2x the noise
     only with five values beyond the tolerance. The split with its couplings free fits a little lower than the one
@@ -196,6 +199,7 @@ def test_a_split_is_weighed_by_bic_not_by_its_cost_alone(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_drift_that_beats_a_cause_within_the_design_is_weighed_against_every_split(tmp_path):
     """Draw 1396 of the untouched seeds 1300-1399 (six sections, 0.52 % noise): section 5 is two sections. The skin
     effect fits to the noise within the design, so no split was searched; Cg6 x3.6, with C5 and Cg4 beyond the
@@ -244,6 +248,7 @@ def test_a_split_found_from_the_design_values_when_its_seeds_are_aligned(tmp_pat
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_split_at_the_noise_floor_is_named_on_its_evidence(tmp_path):
     """Draw 1132 of the benchmark's fixed seeds (three sections, 701 points, 0.12 % noise): section 3 is two
     sections. The baseline's data cost is below the noise floor, with six values beyond the tolerance (three of them
@@ -257,6 +262,7 @@ def test_a_split_at_the_noise_floor_is_named_on_its_evidence(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_skin_effect_absorbed_by_the_baseline_is_named_once_its_values_return(tmp_path):
     """Draw 1173 of the benchmark's fixed seeds (seven sections, 0.17 % noise): every resistance a round
     conductor's internal impedance. The baseline reaches the noise floor with eleven values beyond the tolerance,
@@ -271,6 +277,7 @@ def test_a_skin_effect_absorbed_by_the_baseline_is_named_once_its_values_return(
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_value_off_is_reported_alone_once_its_neighbours_return_onto_the_tolerance(tmp_path):
     """Draw 1120 of the benchmark's fixed seeds (five sections, 0.39 % noise): the capacitance to ground of node 2
     at 2.73x its design. The one-value search finds it, but the fit settles with the series capacitance of section
@@ -281,6 +288,7 @@ def test_a_value_off_is_reported_alone_once_its_neighbours_return_onto_the_toler
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_split_that_one_value_explains_as_well_is_mentioned_beside_it(tmp_path):
     """Draw 1152 of the benchmark's fixed seeds (four sections, 291 points, 1.3 % noise, Touchstone): one section
     split in two. One capacitance to ground off explains the record within 1 in BIC of the split. Either the split
@@ -360,6 +368,7 @@ def test_a_fit_at_the_noise_that_misses_a_weak_mode_is_realigned(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_split_that_beats_a_value_off_by_less_than_the_naming_margin_is_no_finding(tmp_path):
     """Draw 1382 of the untouched seeds 1300-1399 (ten sections, 282 points, 0.42 % noise): L10 alone at 0.57x its
     design, no cause. The best of the twelve places a section could be missing (a split of section 1) fits below the

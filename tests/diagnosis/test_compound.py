@@ -33,6 +33,7 @@ def test_skin_effect_and_core_loss_named_together_without_drift():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_missing_section_named_against_the_design():
     """The design merges two of the winding's seven sections; the baseline absorbs it into drifted capacitances, and
     the section is weighed against those values freed, both converged."""

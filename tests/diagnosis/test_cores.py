@@ -140,6 +140,7 @@ print(json.dumps({{"causes": d.causes, "cost": final.cost, "baseline": d.baselin
 
 
 @pytest.mark.slow
+@pytest.mark.long
 @needs_helper
 def test_a_diagnosis_is_the_same_with_and_without_the_helper(tmp_path):
     """The independent generator's one-port skin-effect case (three sections), diagnosed in two fresh processes."""

@@ -59,6 +59,7 @@ def test_doubled_capacitance_is_drift_not_a_cause():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_skin_effect_named_from_the_design_values(tmp_path):
     from estimation.diagnosis.report import write_report
 

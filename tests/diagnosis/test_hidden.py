@@ -108,6 +108,7 @@ def test_two_winding_missing_section_is_named_to_the_noise():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_two_winding_lamination_core_loss_is_named_alone():
     """hv-4section, six responses: the core-loss resistance of the truth is a lamination's eddy-current impedance
     (``R q tanh q / (1 + q tanh q)``, ``q = sqrt(j f / f_b)``, the generator's own form). One relaxation time leaves

@@ -41,6 +41,7 @@ def test_undetectable_split_is_none():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_effect_absorbed_by_the_fitted_baseline_is_found_from_the_design_values():
     """Thesis (2.5) rearranged on a 6-section cascade: the fitted baseline absorbs it into distorted values."""
     case = one_port_case("magnetising-inductance", 3)
