@@ -6,8 +6,12 @@ from the fitted baseline's values and, when the baseline was given and has
 absorbed something (values moved far off the design), from the design
 values too: a baseline fitted without the effect has absorbed it into
 distorted values, a local minimum the full fit seldom leaves, while the
-design values are free of it. The best two forms of the first pool and the
-best of the second are then fitted in full (circuit values free). A cause
+design values are free of it. The best two forms of the first pool, and
+every form of the second, are then fitted in full (circuit values free). A
+form screened on the design values is held at resonances that miss the
+measured ones, and that miss, not the form, sets its screened cost: so each
+form of the second pool starts with its resonances moved onto the measured
+ones (:func:`.align.aligned_start`), and none is ranked out before. A cause
 that reaches the noise floor from the fitted baseline needs no second pool,
 and once one cause does, the others start from the fitted baseline only.
 
@@ -32,6 +36,7 @@ import numpy as np
 
 from pris_cosim.circuits.circuit import Circuit
 
+from estimation.diagnosis.align import aligned_start
 from estimation.diagnosis.causes.catalogue import CoreLoss, Effect, effect_variants, winding_groups
 from estimation.diagnosis.context import Context, log
 from estimation.diagnosis.cores import shared_map
@@ -42,10 +47,11 @@ from estimation.diagnosis.onto_box import onto_box
 
 #: A screened form: its screened cost, the effect, its fit object and the screened result.
 Screened = tuple[float, Effect, FrequencyFit, FitResult]
-#: Refinements of the first pool (from the fitted baseline) and of the second (from the design values), with their
-#: evaluation budgets.
+#: Refinements of the first pool (from the fitted baseline: its best two by screened cost) and of the second (from
+#: the design values: every form, as the screened costs there measure the resonances' miss, not the form), with
+#: their evaluation budgets.
 TOP_FIRST, NFEV_FIRST = 2, 50
-TOP_SECOND, NFEV_SECOND = 1, 30
+NFEV_SECOND = 30
 
 
 def effect_starts(ctx: Context, fit: FrequencyFit, effect: Effect) -> list[dict[str, float]] | None:
@@ -78,12 +84,14 @@ def _screened_form(args: tuple[Context, Circuit, Effect]) -> tuple[FrequencyFit 
         return None, None
 
 
-def _refined_form(args: tuple[Context, FrequencyFit, Effect, FitResult, float, int]) -> FitResult | None:
-    """A screened form fitted in full, circuit values free."""
-    ctx, fit, eff, pre, must_beat, nfev = args
+def _refined_form(args: tuple[Context, FrequencyFit, Effect, FitResult, float, int, bool]) -> FitResult | None:
+    """A screened form fitted in full, circuit values free; with ``align`` from its resonances moved onto the
+    measured ones (:func:`.align.aligned_start`, the effect's screened parameters kept)."""
+    ctx, fit, eff, pre, must_beat, nfev, align = args
     try:
-        return fit.fit([effect_starts(ctx, fit, eff)], x0s=pre.x[None], keep_starts=1, must_beat=must_beat,
-                       max_nfev=nfev, tol=1e-6)
+        x0 = aligned_start(fit, pre.x) if align else None
+        return fit.fit([effect_starts(ctx, fit, eff)], x0s=(pre.x if x0 is None else x0)[None], keep_starts=1,
+                       must_beat=must_beat, max_nfev=nfev, tol=1e-6)
     except CANDIDATE_FAILURES:
         return None
 
@@ -109,11 +117,12 @@ def _to_refine(screened: list[Screened], top: int) -> list[Screened]:
 
 
 def _best_refined(screened: list[Screened], refine: list[Screened], refined: Sequence[FitResult | None],
-                  must_beat: float, best: FitResult | None) -> FitResult | None:
-    """The best of ``best`` and a pool's refinements by BIC; a form clearly worse than the pool's best screened one is
-    not used once a fit beats ``must_beat`` (it is fitted beside the first, not used)."""
+                  must_beat: float, best: FitResult | None, ranked: bool = True) -> FitResult | None:
+    """The best of ``best`` and a pool's refinements by BIC; when the pool is ``ranked`` by its screened costs, a form
+    clearly worse than the pool's best screened one is not used once a fit beats ``must_beat`` (it is fitted beside
+    the first, not used)."""
     for i, ((cost, *_), res) in enumerate(zip(refine, refined)):
-        if i and best is not None and best.objective < must_beat and cost > 2 * screened[0][0]:
+        if ranked and i and best is not None and best.objective < must_beat and cost > 2 * screened[0][0]:
             break
         if res is not None and (best is None or res.bic < best.bic):  # the forms differ in parameter counts
             best = res
@@ -131,10 +140,10 @@ def fit_cause(ctx: Context, cause: str, base: FitResult, must_beat: float, from_
     """Every form and group of ``cause``: effect-only fits from the start grids, then the best in full.
 
     The best forms of the first pool (from ``base``'s fitted values) and,
-    unless those reach the noise floor or ``from_nominal`` is false, the
-    best of the second (from the design values, when the baseline was given
-    and ``base`` has no effect) are fitted in full. Returns the best fit and
-    the forms by screened cost from ``base``.
+    unless those reach the noise floor or ``from_nominal`` is false, every
+    form of the second (from the design values with the resonances aligned,
+    when the baseline was given and ``base`` has no effect) are fitted in
+    full. Returns the best fit and the forms by screened cost from ``base``.
     """
     circuit = base.fitted_circuit()
     groups = winding_groups(circuit, configuration_ports(ctx.configs), group_names(ctx.configs))
@@ -151,13 +160,13 @@ def fit_cause(ctx: Context, cause: str, base: FitResult, must_beat: float, from_
         fitted = ahead if ahead is not None else shared_map(_screened_form, [(ctx, start, eff) for eff in variants])
         screened = _pool(variants, fitted)
         pools.append(screened)
-        top, nfev = (TOP_FIRST, NFEV_FIRST) if k == 0 else (TOP_SECOND, NFEV_SECOND)
+        top, nfev = (TOP_FIRST, NFEV_FIRST) if k == 0 else (len(screened), NFEV_SECOND)
         refine = _to_refine(screened, top)
-        jobs = [(_refined_form, (ctx, fit, eff, pre, must_beat, nfev)) for _, eff, fit, pre in refine]
+        jobs = [(_refined_form, (ctx, fit, eff, pre, must_beat, nfev, k > 0)) for _, eff, fit, pre in refine]
         following = [(_screened_form, (ctx, starts[k + 1], eff)) for eff in variants] if k + 1 < len(starts) else []
         done = shared_map(_form_job, jobs + following)
         ahead = done[len(jobs):] if following else None
-        best = _best_refined(screened, refine, done[: len(jobs)], must_beat, best)
+        best = _best_refined(screened, refine, done[: len(jobs)], must_beat, best, ranked=k == 0)
     if best is not None and best.effects and ctx.prior is not None and ctx.drift(base):
         # the baseline's values beyond the tolerance may hold this cause's share: followed back onto the tolerance
         # with the cause fitted at each step, they either return (the cause takes their share) or cannot
