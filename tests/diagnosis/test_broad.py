@@ -38,6 +38,15 @@ def _value_off_alone(seed: int, effect: str, name: str, folder: Path) -> None:
     assert reported_drift(d.drift, case.drift) == {name}, d.drift
 
 
+def _skin_effect_alone(seed: int, folder: Path) -> None:
+    """Draw ``seed`` of the benchmark's fixed seeds has the skin effect hidden: it alone is named, with no drift."""
+    case = draw(seed)
+    assert case.effect == "skin"
+    d = _diagnose(case, folder)
+    assert d.causes == ["skin-effect"], (d.cause, d.candidates())
+    assert not d.drift, d.drift
+
+
 def _first_with_sections(effect: str, sections: int) -> int:
     return next(s for s in range(1, 10_000) if draw(s, effect).netlist.count("\nL") == sections)
 
@@ -269,11 +278,7 @@ def test_a_skin_effect_absorbed_by_the_baseline_is_named_once_its_values_return(
     two of them more than two tolerances off, and the skin effect fitted from there gains half a per cent. Followed
     from those values back onto the tolerance, the skin effect's fit keeps the noise floor with every value in the
     box: the skin effect is named and nothing is reported as drift."""
-    case = draw(1173)
-    assert case.effect == "skin"
-    d = _diagnose(case, tmp_path)
-    assert d.causes == ["skin-effect"], (d.cause, d.candidates())
-    assert not d.drift, d.drift
+    _skin_effect_alone(1173, tmp_path)
 
 
 @pytest.mark.slow
@@ -285,11 +290,7 @@ def test_a_conductors_skin_effect_is_told_from_a_lamination_from_the_design_valu
     effect's forms stopped at 500x the floor and the lamination was named. Each form is now refined from the design
     values with its resonances moved onto the measured ones: the conductor's skin effect, the generator's own form
     (two parameters, as the lamination), is named, with no drift."""
-    case = draw(1358)
-    assert case.effect == "skin"
-    d = _diagnose(case, tmp_path)
-    assert d.causes == ["skin-effect"], (d.cause, d.candidates())
-    assert not d.drift, d.drift
+    _skin_effect_alone(1358, tmp_path)
 
 
 @pytest.mark.slow
