@@ -1,6 +1,7 @@
 """Diagnosis on broad cases drawn from physics by code that shares nothing with it, and its speed.
 
-    python benchmarks/bench_broad.py [--draws N] [--first SEED] [--effect EFFECT] [--speed-only] [--out FILE]
+    python benchmarks/bench_broad.py [--draws N] [--first SEED] [--effect EFFECT] [--visible] [--speed-only]
+                                     [--out FILE]
 
 Cases: :mod:`broad_cases` (3-10 section windings solved by their own nodal
 equations; skin effect from a round conductor's Bessel solution, core loss
@@ -19,7 +20,11 @@ table counts those apart, and a second share takes such a draw as right
 when it is answered with nothing (no cause, no drift). A third share counts
 a draw as right when the truth is named among the alternatives the report
 gives beside its answer, in the place of one named: the data fit them as well,
-and the report says it cannot tell which.
+and the report says it cannot tell which. With ``--visible`` a seed whose own
+draw hides its effect is replaced by its first independent draw that shows
+it (:func:`broad_cases.visible_draw`: the seed's generator drawn again, the
+same effect; decided from the generator's solver alone, before any diagnosis
+sees the draw); its row is marked ``seed/k``.
 
 Prints one row per draw, then the share right, the false alarms (a cause
 named on a draw with none), the clean draws with drift reported, and the
@@ -43,15 +48,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from broad_cases import EFFECTS, VISIBLE, draw, reported_drift, signature, write  # noqa: E402
+from broad_cases import EFFECTS, VISIBLE, draw, reported_drift, signature, visible_draw, write  # noqa: E402
 
 from estimation.diagnosis import diagnose_frequency  # noqa: E402
 from pris_cosim.measured.formats import load_measured  # noqa: E402
 from pris_cosim.circuits.netlist import read_netlist  # noqa: E402
 
 
-def run(seed: int, effect: str | None, folder: Path) -> dict:
-    case = draw(seed, effect)
+def run(seed: int, effect: str | None, folder: Path, k: int = 0) -> dict:
+    """Draw ``k`` of ``seed`` (:func:`broad_cases.draw`) diagnosed: its row of the table."""
+    case = draw(seed, effect, k=k)
     data, net = write(case, folder)
     m = load_measured(str(data))
     t = time.perf_counter()
@@ -60,8 +66,9 @@ def run(seed: int, effect: str | None, folder: Path) -> dict:
     wall = time.perf_counter() - t
     said, drift = sorted(d.causes), reported_drift(d.drift, case.drift)
     ok = said == sorted(case.causes) and (case.drift is None or drift == set(case.drift))
-    return {"seed": seed, "effect": case.effect, "sections": case.netlist.count("\nL"), "points": case.frequency_hz.size,
-            "noise": case.noise, "fmt": case.fmt, "truth": case.causes, "truth_drift": case.drift, "said": d.cause,
+    return {"seed": seed, "draw": k, "effect": case.effect, "sections": case.netlist.count("\nL"),
+            "points": case.frequency_hz.size, "noise": case.noise, "fmt": case.fmt, "truth": case.causes,
+            "truth_drift": case.drift, "said": d.cause,
             "causes": said, "drift": sorted(drift), "gain": d.gain, "ok": ok, "wall": wall,
             "signature": signature(case), "cause_alternatives": sorted({a["cause"] for a in d.cause_alternatives}),
             "drift_alternatives": sorted(reported_drift(d.drift_alternatives, case.drift))}
@@ -103,30 +110,40 @@ def main() -> None:
     ap.add_argument("--effect", choices=EFFECTS)
     ap.add_argument("--speed-only", action="store_true")
     ap.add_argument("--out", type=Path, help="JSON-lines file of the draws' rows (appended; resumed from)")
+    ap.add_argument("--visible", action="store_true",
+                    help="a seed whose own draw hides its effect in the noise is replaced by its first draw that "
+                         "shows it (broad_cases.visible_draw, decided before the diagnosis)")
     a = ap.parse_args()
-    done: dict[int, dict] = {}
+    done: dict[tuple[int, int], dict] = {}
     if a.out is not None and a.out.exists():
         for line in a.out.read_text().splitlines():
             if line.strip():
                 r = json.loads(line)
                 if a.effect is None or r["effect"] == a.effect:
-                    done[r["seed"]] = r
+                    done[r["seed"], r.get("draw", 0)] = r
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         rows = []
         if not a.speed_only:
-            print(f"{'seed':>5} {'effect':9} {'n':>2} {'pts':>4} {'noise':>6} fmt | truth | said | drift | gain | s")
+            print(f"{'seed':>7} {'effect':9} {'n':>2} {'pts':>4} {'noise':>6} fmt | truth | said | drift | gain | s")
             for seed in range(a.first, a.first + a.draws):
-                r = done.get(seed)
+                k = 0
+                if a.visible:
+                    own = done.get((seed, 0))
+                    if own is None or own.get("signature", 0.0) < VISIBLE and own["effect"] != "none":
+                        k = visible_draw(seed, a.effect)[0]
+                r = done.get((seed, k))
                 if r is None:
-                    r = run(seed, a.effect, folder)
+                    r = run(seed, a.effect, folder, k)
                     if a.out is not None:
                         with a.out.open("a") as fh:
                             fh.write(json.dumps(r) + "\n")
                 if "signature" not in r:  # a row from before the signature was measured
-                    r["signature"] = signature(draw(seed, a.effect))
+                    r["signature"] = signature(draw(seed, a.effect, k=k))
                 rows.append(r)
-                print(f"{r['seed']:5d} {r['effect']:9} {r['sections']:2d} {r['points']:4d} {r['noise']:6.2%} "
+                print(f"{r['seed']:5d}{'/' + str(k) if k else '  '} {r['effect']:9} {r['sections']:2d} "
+                      f"{r['points']:4d} "
+                      f"{r['noise']:6.2%} "
                       f"{r['fmt']:3} | {','.join(r['truth']) or 'none'} {r['truth_drift'] or ''} | "
                       f"{'ok' if r['ok'] else 'NO'} {','.join(r['causes']) or r['said']} | {','.join(r['drift'])} | "
                       f"{r['gain']:.3f} | {r['wall']:.0f}"

@@ -173,10 +173,16 @@ def _split(w: Winding, j: int, a: float, rng: np.random.Generator) -> Winding:
     return Winding(R, L, Cs, Cg, K)
 
 
-def draw(seed: int, effect: str | None = None, points: int | None = None) -> Case:
+def draw(seed: int, effect: str | None = None, points: int | None = None, k: int = 0) -> Case:
     """One case from ``seed`` (the effect drawn from ``EFFECTS`` unless given; ``points`` replaces the drawn number
-    of frequencies, the rest of the draw unchanged)."""
-    rng = np.random.default_rng(seed)
+    of frequencies, the rest of the draw unchanged).
+
+    ``k > 0`` is another, independent draw of the same seed's effect (the winding, grid, noise and the effect's
+    size drawn again from the generator ``[seed, k]``); ``k = 0`` is the seed's own draw.
+    """
+    if k and effect is None:
+        effect = effect_of(seed)
+    rng = np.random.default_rng(seed if k == 0 else [seed, k])
     effect = effect or EFFECTS[int(rng.integers(len(EFFECTS)))]
     n = int(rng.integers(3, 11))
     truth = _random_winding(rng, n)
@@ -215,8 +221,14 @@ def draw(seed: int, effect: str | None = None, points: int | None = None) -> Cas
     clean = zin(truth, f, r_of_f, l_factor)
     z = clean * np.exp(noise / np.sqrt(2) * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)))
     fmt = "s1p" if rng.random() < 0.3 else "csv"
-    return Case(f"broad_{seed}_{effect}", effect, f, z, _netlist(design, f"design, {n} sections"), "n1", causes,
+    name = f"broad_{seed}_{effect}" + (f"_d{k}" if k else "")
+    return Case(name, effect, f, z, _netlist(design, f"design, {n} sections"), "n1", causes,
                 None if effect in ("skin", "coreloss", "split") else drift, noise, fmt, extra, clean, design, truth)
+
+
+def effect_of(seed: int) -> str:
+    """The effect ``seed``'s own draw hides (:func:`draw` with ``k = 0``)."""
+    return EFFECTS[int(np.random.default_rng(seed).integers(len(EFFECTS)))]
 
 
 def _solve_many(R, L, Cs, Cg, K, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -272,6 +284,29 @@ def signature(case: Case, tolerance: float = 0.2, max_nfev: int = 400, steps: in
     called hidden (small ``lambda``) is hidden.
     """
     return within_tolerance(case, tolerance, max_nfev, steps)[0]
+
+
+#: Draws of one seed tried by :func:`visible_draw` before it gives up.
+MAX_DRAWS = 50
+
+
+def visible_draw(seed: int, effect: str | None = None, max_draws: int = MAX_DRAWS) -> tuple[int, Case, float]:
+    """The first draw ``k = 0, 1, ...`` of ``seed`` (:func:`draw`) whose effect shows: ``(k, case, signature)``.
+
+    A draw whose :func:`signature` is below :data:`VISIBLE` hides its effect in the noise: the design's own model
+    within the tolerance fits it, so no diagnosis can name it, and such a draw measures the noise, not the
+    diagnosis. The seed's own draw (``k = 0``) is kept when its effect shows, and always when it hides nothing
+    (``none``). Which draw is taken is decided here, from the generator's solver alone, before any diagnosis sees
+    it. Raises ``ValueError`` when none of ``max_draws`` draws shows.
+    """
+    for k in range(max_draws):
+        case = draw(seed, effect, k=k)  # the seed's own draw as the benchmark draws it (``effect`` as given)
+        if case.effect == "none":
+            return k, case, 0.0
+        lam = signature(case)
+        if lam >= VISIBLE:
+            return k, case, lam
+    raise ValueError(f"seed {seed}: no draw of {max_draws} shows its {effect} effect")
 
 
 def within_tolerance(case: Case, tolerance: float = 0.2, max_nfev: int = 400, steps: int = 8

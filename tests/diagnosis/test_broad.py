@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from broad_cases import (EFFECTS, VISIBLE, _log_z_and_gradient, _solve_many, draw, reported_drift, signature,
-                         within_tolerance, write)
+                         visible_draw, within_tolerance, write)
 
 from estimation.diagnosis import diagnose_frequency
 from estimation.diagnosis.verdict import FIT_FACTOR
@@ -77,6 +77,21 @@ def test_signature_tells_hidden_effects_from_visible_ones():
     assert signature(draw(1088)) < 1.0
     assert signature(draw(1014)) > 1e3 * VISIBLE
     assert signature(draw(1089)) < 0.1 * VISIBLE
+
+
+@pytest.mark.slow
+def test_a_seed_whose_draw_hides_its_effect_is_drawn_again_until_it_shows():
+    """Draw 1383 (a skin effect) is hidden (its signature below ``VISIBLE``); its own draw is unchanged by the
+    redraw index, the redraws are independent windings with the same effect, and the first that shows is taken."""
+    own = draw(1383)
+    assert signature(own) < VISIBLE
+    assert np.array_equal(draw(1383, k=0).z, own.z)
+    k, case, lam = visible_draw(1383)
+    assert k > 0 and case.effect == own.effect == "skin" and case.causes == ["skin-effect"]
+    assert lam >= VISIBLE
+    assert not np.array_equal(case.frequency_hz, own.frequency_hz) or not np.array_equal(case.z, own.z)
+    k_none, clean, lam_none = visible_draw(1300, "none")
+    assert k_none == 0 and lam_none == 0.0 and clean.effect == "none"
 
 
 def test_a_fault_at_the_last_node_that_the_design_within_tolerance_fits_is_hidden():
