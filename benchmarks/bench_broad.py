@@ -144,8 +144,7 @@ def main() -> None:
                     r["signature"] = signature(draw(seed, a.effect, k=k))
                 rows.append(r)
                 print(f"{r['seed']:5d}{'/' + str(k) if k else '  '} {r['effect']:9} {r['sections']:2d} "
-                      f"{r['points']:4d} "
-                      f"{r['noise']:6.2%} "
+                      f"{r['points']:4d} {r['noise']:6.2%} "
                       f"{r['fmt']:3} | {','.join(r['truth']) or 'none'} {r['truth_drift'] or ''} | "
                       f"{'ok' if r['ok'] else 'NO'} {','.join(r['causes']) or r['said']} | {','.join(r['drift'])} | "
                       f"{r['gain']:.3f} | {r['wall']:.0f}"
