@@ -132,8 +132,8 @@ def main() -> None:
                     own = done.get((seed, 0))
                     if own is None or own.get("signature", 0.0) < VISIBLE and own["effect"] != "none":
                         # the draw taken before (rows of a seed's redraws are only written for the one that shows)
-                        redrawn = sorted(j for s_, j in done if s_ == seed and j > 0)
-                        k = redrawn[0] if redrawn else visible_draw(seed, a.effect)[0]
+                        k = (min((j for s_, j in done if s_ == seed and j > 0), default=0)
+                             or visible_draw(seed, a.effect)[0])
                 r = done.get((seed, k))
                 if r is None:
                     r = run(seed, a.effect, folder, k)
